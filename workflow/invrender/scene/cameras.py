@@ -1,0 +1,321 @@
+"""Cameras: COLMAP sparse models (text or binary) and nerfstudio / instant-ngp transforms.json.
+
+Everything becomes ``types.Camera``: world-to-camera ``x_cam = R x_world + t``, OpenCV axes
+(x right, y down, z forward), pixel (0, 0)'s centre at (0.5, 0.5), COLMAP parameter order.
+Lists are sorted by image name.
+
+transforms.json convention (nerfstudio, instant-ngp, NeRF's Blender scenes): each frame's
+``transform_matrix`` is camera-to-world with OpenGL camera axes (x right, y up, z backwards);
+intrinsics ``fl_x, fl_y, cx, cy, w, h`` (pixels), ``k1, k2, p1, p2`` and ``camera_model`` are read
+from the frame, else from the top level; ``camera_angle_x`` / ``camera_angle_y`` (radians, full
+field of view) stand in for missing focal lengths; a missing ``w, h`` is read from the image.
+The world frame is the file's: no axis change is applied to it.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_dir
+from .types import Camera, SceneError
+
+__all__ = ["read_cameras", "read_colmap", "read_transforms_json", "write_colmap", "project_points"]
+
+log = logging.getLogger(__name__)
+
+SUPPORTED_MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV")
+PARAM_COUNT = {"PINHOLE": 4, "SIMPLE_PINHOLE": 3, "OPENCV": 8}
+# OpenGL camera axes -> OpenCV camera axes (flip y and z), as a right factor on camera-to-world.
+GL_TO_CV = np.diag([1.0, -1.0, -1.0])
+
+
+def read_cameras(path) -> list[Camera]:
+    """Read a COLMAP sparse model directory or a transforms.json file.
+
+    A directory without COLMAP files but with a ``transforms.json`` is read as the latter.
+    """
+    path = Path(path)
+    if path.is_file():
+        if path.suffix.lower() == ".json":
+            return read_transforms_json(path)
+        raise SceneError(path, "(file)", "a COLMAP sparse model directory or a transforms.json file")
+    if not path.is_dir():
+        raise SceneError(path, "(file)", "an existing COLMAP sparse model directory or transforms.json")
+    has_colmap = any((path / f"{name}.{ext}").exists() for name in ("cameras", "images") for ext in ("txt", "bin"))
+    if not has_colmap and (path / "transforms.json").is_file():
+        return read_transforms_json(path / "transforms.json")
+    return read_colmap(path)
+
+
+# ---------------------------------------------------------------------------- COLMAP
+
+
+def _model_file(directory: Path, name: str) -> Path:
+    for ext in ("bin", "txt"):
+        if (directory / f"{name}.{ext}").exists():
+            return directory / f"{name}.{ext}"
+    return directory / f"{name}.txt"
+
+
+def read_colmap(directory) -> list[Camera]:
+    import pycolmap
+
+    directory = Path(directory)
+    try:
+        rec = pycolmap.Reconstruction(str(directory))
+    except Exception as exc:  # pycolmap raises ValueError / IndexError with COLMAP's message
+        raise SceneError(directory, "(COLMAP model)", f"a readable COLMAP sparse model ({exc})") from None
+    cameras_file = _model_file(directory, "cameras")
+    out = []
+    skipped = []
+    for image in sorted(rec.images.values(), key=lambda im: im.name):
+        if not image.has_pose:
+            skipped.append(image.name)
+            continue
+        cam = rec.cameras[image.camera_id]
+        model = cam.model.name
+        if model not in SUPPORTED_MODELS:
+            raise SceneError(
+                cameras_file,
+                f"camera {image.camera_id} (image {image.name}) model",
+                f"one of {', '.join(SUPPORTED_MODELS)}, got {model}",
+            )
+        pose = image.cam_from_world().matrix()
+        out.append(
+            Camera(
+                name=image.name,
+                model=model,
+                width=int(cam.width),
+                height=int(cam.height),
+                params=np.asarray(cam.params, np.float64).copy(),
+                R=np.asarray(pose[:, :3], np.float64).copy(),
+                t=np.asarray(pose[:, 3], np.float64).copy(),
+            )
+        )
+    if skipped:
+        log.warning("%s: %d image(s) without a pose skipped: %s", directory, len(skipped), ", ".join(skipped[:5]))
+    return out
+
+
+def _check_camera(cam: Camera, where) -> None:
+    if cam.model not in SUPPORTED_MODELS:
+        raise SceneError(where, f"camera {cam.name} model", f"one of {', '.join(SUPPORTED_MODELS)}, got {cam.model}")
+    if len(cam.params) != PARAM_COUNT[cam.model]:
+        raise SceneError(
+            where, f"camera {cam.name} params", f"{PARAM_COUNT[cam.model]} values for {cam.model}, got {len(cam.params)}"
+        )
+    R = np.asarray(cam.R, np.float64)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise SceneError(where, f"camera {cam.name} R", "a 3x3 rotation matrix")
+
+
+def write_colmap(directory, cameras: list[Camera]) -> None:
+    """Write a text COLMAP model (cameras, images, rigs, frames, empty points3D) atomically.
+
+    One COLMAP camera, trivial rig and trivial frame per image, ids 1..n in image-name order.
+    pycolmap 4 also writes rigs.txt and frames.txt; COLMAP 3.x readers ignore them.
+    """
+    import pycolmap
+
+    directory = Path(directory)
+    cameras = sorted(cameras, key=lambda c: c.name)
+    names = [c.name for c in cameras]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise SceneError(directory, f"camera {dup} name", "unique image names")
+    rec = pycolmap.Reconstruction()
+    for i, cam in enumerate(cameras, 1):
+        _check_camera(cam, directory)
+        rec.add_camera_with_trivial_rig(
+            pycolmap.Camera(
+                camera_id=i,
+                model=cam.model,
+                width=int(cam.width),
+                height=int(cam.height),
+                params=np.asarray(cam.params, np.float64),
+            )
+        )
+        pose = np.hstack([np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64).reshape(3, 1)])
+        rec.add_image_with_trivial_frame(
+            pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose)
+        )
+    with atomic_dir(directory) as tmp:
+        rec.write_text(str(tmp))
+
+
+def project_points(camera: Camera, points) -> np.ndarray:
+    """Project (N, 3) world points to (N, 2) pixel coordinates (COLMAP convention, OPENCV distortion).
+
+    Points behind the camera get NaN.
+    """
+    X = np.asarray(points, np.float64).reshape(-1, 3)
+    xc = X @ np.asarray(camera.R, np.float64).T + np.asarray(camera.t, np.float64)
+    z = xc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, y = xc[:, 0] / z, xc[:, 1] / z
+    k1, k2, p1, p2 = camera.distortion
+    r2 = x * x + y * y
+    radial = 1 + k1 * r2 + k2 * r2 * r2
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    uv = np.stack([fx * xd + cx, fy * yd + cy], axis=1)
+    uv[z <= 0] = np.nan
+    return uv
+
+
+# ---------------------------------------------------------------------------- transforms.json
+
+
+def _image_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) of an image file, or None if unreadable."""
+    try:
+        if path.suffix.lower() == ".exr":
+            import OpenEXR
+
+            with OpenEXR.File(str(path), header_only=True) as exr:
+                lo, hi = exr.header()["dataWindow"]
+            return int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+        import cv2
+
+        img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
+        return None if img is None else (int(img.shape[1]), int(img.shape[0]))
+    except Exception:
+        return None
+
+
+def _resolve_image(base: Path, file_path: str) -> tuple[str, Path | None]:
+    """Image name (relative, posix) and the file if found; tries common extensions if none given."""
+    rel = Path(file_path.replace("\\", "/"))
+    name = rel.as_posix()
+    while name.startswith("./"):
+        name = name[2:]
+    candidate = base / name
+    if candidate.is_file():
+        return name, candidate
+    if not rel.suffix:
+        for ext in (".png", ".jpg", ".jpeg", ".exr"):
+            if (base / (name + ext)).is_file():
+                return name + ext, base / (name + ext)
+    return name, None
+
+
+def read_transforms_json(path) -> list[Camera]:
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise SceneError(path, "(file)", f"a readable transforms.json ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise SceneError(path, "(document)", f"valid JSON ({exc})") from None
+    if not isinstance(doc, dict):
+        raise SceneError(path, "(document)", "a JSON object")
+    frames = doc.get("frames")
+    if not isinstance(frames, list) or not frames:
+        raise SceneError(path, "frames", "a non-empty list of frames")
+    base = path.parent
+    out = []
+    for i, frame in enumerate(frames):
+        field = f"frames[{i}]"
+        if not isinstance(frame, dict):
+            raise SceneError(path, field, "an object")
+
+        def get(key, default=None):
+            value = frame.get(key, doc.get(key, default))
+            return value
+
+        def number(key, default=None):
+            value = get(key, default)
+            if value is None:
+                return None
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                where = f"{field}.{key}" if key in frame else key
+                raise SceneError(path, where, f"a finite number, got {value!r}")
+            return float(value)
+
+        file_path = frame.get("file_path")
+        if not isinstance(file_path, str) or not file_path:
+            raise SceneError(path, f"{field}.file_path", "the image's path (a string)")
+        name, image_file = _resolve_image(base, file_path)
+
+        model = get("camera_model", None)
+        if model is not None and model not in SUPPORTED_MODELS:
+            where = f"{field}.camera_model" if "camera_model" in frame else "camera_model"
+            raise SceneError(path, where, f"one of {', '.join(SUPPORTED_MODELS)}, got {model}")
+
+        w, h = number("w"), number("h")
+        if w is None or h is None:
+            size = _image_size(image_file) if image_file is not None else None
+            if size is None:
+                raise SceneError(path, f"{field} w,h", f"image size w, h, or a readable image at {base / name}")
+            w, h = (w or size[0]), (h or size[1])
+        fx, fy = number("fl_x"), number("fl_y")
+        angle_x, angle_y = number("camera_angle_x"), number("camera_angle_y")
+        if fx is None and angle_x is not None:
+            fx = 0.5 * w / math.tan(0.5 * angle_x)
+        if fy is None and angle_y is not None:
+            fy = 0.5 * h / math.tan(0.5 * angle_y)
+        if fx is None and fy is not None:
+            fx = fy
+        if fy is None:
+            fy = fx
+        if fx is None:
+            raise SceneError(path, f"{field} fl_x", "a focal length fl_x (pixels) or camera_angle_x (radians)")
+        if fx <= 0 or fy <= 0:
+            raise SceneError(path, f"{field} fl_x,fl_y", f"positive focal lengths, got {fx}, {fy}")
+        cx, cy = number("cx", w / 2), number("cy", h / 2)
+        dist = [number(k, 0.0) for k in ("k1", "k2", "p1", "p2")]
+        for k in ("k3", "k4"):
+            if (number(k, 0.0) or 0.0) != 0.0:
+                raise SceneError(path, f"{field}.{k}", f"0 (the OPENCV model has k1, k2, p1, p2 only), got {get(k)}")
+        if model is None:
+            model = "OPENCV" if any(dist) else "PINHOLE"
+        if model == "OPENCV":
+            params = [fx, fy, cx, cy, *dist]
+        elif any(dist):
+            raise SceneError(path, f"{field} k1,k2,p1,p2", f"no distortion for camera_model {model}")
+        elif model == "SIMPLE_PINHOLE":
+            if not math.isclose(fx, fy, rel_tol=1e-9):
+                raise SceneError(path, f"{field} fl_x,fl_y", f"fl_x == fl_y for SIMPLE_PINHOLE, got {fx}, {fy}")
+            params = [fx, cx, cy]
+        else:
+            params = [fx, fy, cx, cy]
+
+        m = frame.get("transform_matrix")
+        try:
+            m = np.asarray(m, np.float64)
+        except (TypeError, ValueError):
+            m = np.zeros(0)
+        if m.shape not in ((4, 4), (3, 4)) or not np.isfinite(m).all():
+            raise SceneError(path, f"{field}.transform_matrix", "a 4x4 (or 3x4) camera-to-world matrix of numbers")
+        rot_gl, center = m[:3, :3], m[:3, 3]
+        rot = rot_gl @ GL_TO_CV  # camera-to-world rotation, OpenCV camera axes
+        if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-4) or np.linalg.det(rot) <= 0:
+            raise SceneError(
+                path, f"{field}.transform_matrix", "a rigid camera-to-world transform (rotation without scale)"
+            )
+        u, _, vt = np.linalg.svd(rot)  # snap to the nearest rotation
+        rot = u @ vt
+        R = rot.T
+        out.append(
+            Camera(
+                name=name,
+                model=model,
+                width=int(round(w)),
+                height=int(round(h)),
+                params=np.asarray(params, np.float64),
+                R=R,
+                t=-R @ center,
+            )
+        )
+    out.sort(key=lambda c: c.name)
+    names = [c.name for c in out]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise SceneError(path, "frames file_path", f"unique image paths, {dup} appears twice")
+    return out
