@@ -1,13 +1,119 @@
-"""The `invrender` command: one subcommand per stage. It only parses arguments."""
+"""The `invrender` command: one subcommand per stage. It only parses arguments; each stage is a
+function in the package that the tests call directly."""
+
+from __future__ import annotations
 
 import argparse
+import json
+import logging
 import sys
+from pathlib import Path
 
 
-def main(argv=None):
+def _key_values(pairs: list[str]) -> dict:
+    """key=value pairs with JSON values (true, 3, 0.5), for feature overrides."""
+    out = {}
+    for pair in pairs or []:
+        key, _, value = pair.partition("=")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError as error:
+            raise SystemExit(f"--set {pair}: expected key=<JSON value>") from error
+    return out
+
+
+def _load_config(path: str | None) -> dict:
+    if not path:
+        return {}
+    import yaml
+
+    with open(path) as handle:
+        return yaml.safe_load(handle) or {}
+
+
+def cmd_synthesize(args):
+    from .synthesize import synthesize
+
+    synthesize(args.kind, Path(args.out), _load_config(args.config), spp=args.spp, seed=args.seed, device=args.device)
+
+
+def cmd_features(args):
+    from .render.features import AnalysisSettings
+    from .render.stage import write_features
+
+    settings = AnalysisSettings(**_load_config(args.config).get("analysis", {}))
+    write_features(args.scene, args.out, settings, _key_values(args.set))
+
+
+def cmd_render(args):
+    from .render.stage import render_views
+
+    render_views(args.scene, args.out, args.features, spp=args.spp, seed=args.seed, cameras=args.camera,
+                 device=args.device)
+
+
+def cmd_bench(args):
+    from .bench import run_benchmark
+
+    run_benchmark(args.what, args)
+
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="invrender", description=__doc__)
-    parser.add_subparsers(dest="stage", required=True)
-    args = parser.parse_args(argv)
+    parser.add_argument("--log", help="also write the log to this file")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    stages = parser.add_subparsers(dest="stage", required=True, metavar="STAGE")
+
+    p = stages.add_parser("synthesize", help="a parametric scene and its capture (the demo's input)")
+    p.add_argument("kind", choices=["room", "duplicates"])
+    p.add_argument("--out", required=True, help="capture directory to write")
+    p.add_argument("--config", help="YAML with the scene's size, counts, resolutions")
+    p.add_argument("--spp", type=int, default=256)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", help="OpenCL device name substring (default: a GPU, else PoCL)")
+    p.set_defaults(func=cmd_synthesize)
+
+    p = stages.add_parser("features", help="decide which effects a scene calls for -> features.json")
+    p.add_argument("scene", help="scene directory (scene.json)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--config", help="YAML with an `analysis:` block (bounce_fraction, ...)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a feature, e.g. specular=false")
+    p.set_defaults(func=cmd_features)
+
+    p = stages.add_parser("render", help="render a scene's views (EXR + PNG preview + AOVs)")
+    p.add_argument("scene")
+    p.add_argument("--out", required=True)
+    p.add_argument("--features", help="features.json (default: analyse the scene)")
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--camera", action="append", help="render only this camera (repeatable)")
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_render)
+
+    p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
+    p.add_argument("what", choices=["render"])
+    p.add_argument("--quick", action="store_true", help="small sizes, to check the harness")
+    p.add_argument("--out", default="docs/benchmarks", help="where the tables and plots go")
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    handlers = [logging.StreamHandler(sys.stderr)]
+    if args.log:
+        Path(args.log).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(args.log))
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, handlers=handlers,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    from .scene.types import SceneError
+
+    try:
+        args.func(args)
+    except SceneError as error:
+        logging.getLogger("invrender").error("%s", error)
+        return 2
     return 0
 
 

@@ -1,0 +1,109 @@
+#line 2 "bvh.h"
+/* Traversal of the 8-wide BVH built on the host (workflow/invrender/render/bvh.py).
+ * One ray tests eight child boxes at once with float8: on CPUs (PoCL) that is the SIMD that
+ * pays, since divergent rays are not vectorised across work-items; on GPUs it is eight
+ * independent slab tests per work-item. Node layout: bounds rows (min x, min y, min z, max x,
+ * max y, max z) x 8 lanes; children rows (child node or first leaf slot, count), count 0 =
+ * internal node, > 0 = leaf, -1 = empty lane (whose box is +inf..-inf and never hit). */
+#ifndef INVRENDER_BVH_H
+#define INVRENDER_BVH_H
+
+#define BVH_STACK_SIZE 96
+
+typedef struct {
+    float t;      /* RAY_TMAX on a miss */
+    int slot;     /* leaf slot of the triangle hit, -1 on a miss */
+    float b1, b2; /* barycentrics of vertices 1 and 2 */
+} Hit;
+
+/* Entry distances of the eight lanes; lanes missed get +inf. Near and far planes are chosen by
+ * the sign of the direction, not by min/max, so empty lanes (+inf..-inf) are always missed.
+ * The far distance is widened by 2 gamma(3) (Ize 2013) so float rounding never drops a box the
+ * ray touches. */
+inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r, float tmax)
+{
+    global const float8* b = bounds + 6 * node;
+    int sx = r->inv_d.x < 0.0f, sy = r->inv_d.y < 0.0f, sz = r->inv_d.z < 0.0f;
+    float8 tnx = (b[0 + 3 * sx] - r->o.x) * r->inv_d.x;
+    float8 tny = (b[1 + 3 * sy] - r->o.y) * r->inv_d.y;
+    float8 tnz = (b[2 + 3 * sz] - r->o.z) * r->inv_d.z;
+    float8 tfx = (b[3 - 3 * sx] - r->o.x) * r->inv_d.x;
+    float8 tfy = (b[4 - 3 * sy] - r->o.y) * r->inv_d.y;
+    float8 tfz = (b[5 - 3 * sz] - r->o.z) * r->inv_d.z;
+    float8 tnear = fmax(fmax(tnx, tny), fmax(tnz, (float8)(0.0f)));
+    float8 tfar = fmin(fmin(tfx, tfy), fmin(tfz, (float8)(tmax))) * 1.0000004f;
+    return select((float8)(INFINITY), tnear, tnear <= tfar);
+}
+
+inline float lane(float8 v, int i)
+{
+    switch (i) {
+    case 0: return v.s0; case 1: return v.s1; case 2: return v.s2; case 3: return v.s3;
+    case 4: return v.s4; case 5: return v.s5; case 6: return v.s6; default: return v.s7;
+    }
+}
+
+inline int lane_int(int8 v, int i)
+{
+    switch (i) {
+    case 0: return v.s0; case 1: return v.s1; case 2: return v.s2; case 3: return v.s3;
+    case 4: return v.s4; case 5: return v.s5; case 6: return v.s6; default: return v.s7;
+    }
+}
+
+inline float3 tri_vertex(global const float4* v, int slot, int k) { return v[3 * slot + k].xyz; }
+
+/* Closest hit along r in (0, tmax), ignoring triangle slot `skip` (the one the ray leaves). */
+inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int skip)
+{
+    Hit hit = {tmax, -1, 0.0f, 0.0f};
+    int stack[BVH_STACK_SIZE];
+    float stack_t[BVH_STACK_SIZE];
+    int top = 0;
+    stack[top] = 0;
+    stack_t[top++] = 0.0f;
+    while (top > 0) {
+        --top;
+        if (stack_t[top] > hit.t)
+            continue;
+        int node = stack[top];
+        float8 entry = bvh_lane_entry(s->bvh_bounds, node, r, hit.t);
+        int8 child = s->bvh_children[2 * node], count = s->bvh_children[2 * node + 1];
+        /* Leaves now, inner nodes pushed far to near so the nearest is popped first. */
+        int pushed = 0;
+        for (int i = 0; i < 8; ++i) {
+            float ti = lane(entry, i);
+            if (!(ti <= hit.t))
+                continue;
+            int n = lane_int(count, i), c = lane_int(child, i);
+            if (n > 0) {
+                for (int slot = c; slot < c + n; ++slot) {
+                    float t, b1, b2;
+                    if (slot != skip &&
+                        intersect_triangle(r, tri_vertex(s->tri_v, slot, 0),
+                                           tri_vertex(s->tri_v, slot, 1),
+                                           tri_vertex(s->tri_v, slot, 2), hit.t, &t, &b1, &b2)) {
+                        hit.t = t;
+                        hit.slot = slot;
+                        hit.b1 = b1;
+                        hit.b2 = b2;
+                    }
+                }
+            } else if (n == 0 && top < BVH_STACK_SIZE) {
+                /* insertion into the sorted tail of the stack: descending entry distance */
+                int j = top++;
+                while (j > top - 1 - pushed && stack_t[j - 1] < ti) {
+                    stack[j] = stack[j - 1];
+                    stack_t[j] = stack_t[j - 1];
+                    --j;
+                }
+                stack[j] = c;
+                stack_t[j] = ti;
+                ++pushed;
+            }
+        }
+    }
+    return hit;
+}
+
+#endif

@@ -1,0 +1,71 @@
+#line 2 "integrator.h"
+/* The path tracer of MILO Eq. 4: L = sum_b beta_b E(x_b), beta_{b+1} = beta_b f cos / p_mix.
+ * No next-event estimation and no Russian roulette: one ray per bounce and a fixed path length,
+ * which keeps the adjoint (gradients) a replay of the same loop. */
+#ifndef INVRENDER_INTEGRATOR_H
+#define INVRENDER_INTEGRATOR_H
+
+typedef struct {
+    float3 p;   /* on the triangle, from barycentrics (more precise than o + t d) */
+    float3 n;   /* unit geometric normal, turned to face the incoming ray: two-sided surfaces */
+    float2 uv;
+    int texel;
+} SurfacePoint;
+
+inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
+{
+    float3 v0 = tri_vertex(s->tri_v, h->slot, 0), v1 = tri_vertex(s->tri_v, h->slot, 1),
+           v2 = tri_vertex(s->tri_v, h->slot, 2);
+    float b0 = 1.0f - h->b1 - h->b2;
+    SurfacePoint sp;
+    sp.p = b0 * v0 + h->b1 * v1 + h->b2 * v2;
+    float3 n = normalize(cross(v1 - v0, v2 - v0));
+    sp.n = dot(n, d) > 0.0f ? -n : n;
+    global const float2* uv = s->tri_uv + 3 * h->slot;
+    sp.uv = b0 * uv[0] + h->b1 * uv[1] + h->b2 * uv[2];
+    sp.texel = atlas_texel(s, sp.uv);
+    return sp;
+}
+
+inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uint ray_id, uint sample)
+{
+    float3 radiance = (float3)(0.0f), beta = (float3)(1.0f);
+    int skip = -1;
+    for (int bounce = 0;; ++bounce) {
+        Ray ray = make_ray(o, d);
+        Hit hit = bvh_closest_hit(s, &ray, RAY_TMAX, skip);
+        if (hit.slot < 0) {
+#ifdef FEATURE_ENVIRONMENT
+            radiance += beta * environment(s, d);
+#endif
+            break;
+        }
+        SurfacePoint sp = surface_point(s, &hit, d);
+        Material m = material_at(s, sp.texel);
+        radiance += beta * emitted(s, &m, d);
+        if (bounce == MAX_BOUNCES)
+            break;
+        MixtureWeights w = mixture_weights(s, &m);
+        if (!reflects(&w))
+            break;
+        float3 wo = -d;
+        float4 u = rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_SCATTER);
+        float3 wi = sample_mixture(s, &w, &m, sp.p, sp.n, wo, u);
+        if (!(dot(wi, sp.n) > 0.0f))
+            break; /* spent sample, or below the surface where f = 0 */
+        float3 x = offset_ray_origin(sp.p, sp.n);
+        float pdf = pdf_mixture(s, &w, &m, x, sp.n, wo, wi);
+        float3 f = bsdf_cos(&m, sp.n, wo, wi);
+        if (!(pdf > 0.0f))
+            break;
+        beta *= f / pdf;
+        if (!all_finite3(beta) || !(max3(beta) > 0.0f))
+            break;
+        o = x;
+        d = wi;
+        skip = hit.slot;
+    }
+    return radiance;
+}
+
+#endif

@@ -1,0 +1,113 @@
+#line 2 "lights.h"
+/* MILO's light model, E(x, -d) = ke(x) + kw(x) kg(d) (Eq. 2), and the two light-driven sampling
+ * strategies of the mixture: the kg cube map by luminance (3) and the emitting triangles by
+ * area x radiance (4). Reference: workflow/invrender/render/sampling.py. */
+#ifndef INVRENDER_LIGHTS_H
+#define INVRENDER_LIGHTS_H
+
+#ifdef FEATURE_ENVIRONMENT
+inline float3 environment(const SceneData* s, float3 d) { return s->kg[cube_texel_of(s, d)].xyz; }
+#endif
+
+/* Radiance a surface with material m sends back along a ray travelling in direction d. */
+inline float3 emitted(const SceneData* s, const Material* m, float3 d)
+{
+    float3 e = (float3)(0.0f);
+#ifdef FEATURE_EMISSION
+    e += m->ke;
+#endif
+#ifdef FEATURE_WINDOW
+    if (m->kw > 0.0f)
+        e += m->kw * environment(s, d);
+#endif
+    return e;
+}
+
+/* Smallest i with cdf[i] > u (cdf inclusive, last entry 1). */
+inline int sample_cdf(global const float* cdf, int n, float u)
+{
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (cdf[mid] > u)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
+#ifdef FEATURE_ENV_SAMPLING
+/* Strategy 3: a texel by P(texel) ~ luminance x solid angle, then a point uniform in its face
+ * coordinates. The solid-angle density is P / (2/N)^2 x (1 + sc^2 + tc^2)^(3/2), the Jacobian
+ * of the gnomonic projection of a cube face. */
+inline float3 sample_environment(const SceneData* s, float u1, float u2, float u3)
+{
+    int n = s->cube_n;
+    int texel = sample_cdf(s->env_cdf, 6 * n * n, u1);
+    int face = texel / (n * n), rc = texel % (n * n);
+    float sc = 2.0f * ((float)(rc % n) + u2) / (float)n - 1.0f;
+    float tc = 2.0f * ((float)(rc / n) + u3) / (float)n - 1.0f;
+    return cube_direction(face, sc, tc);
+}
+
+inline float pdf_environment(const SceneData* s, float3 d)
+{
+    float sc, tc;
+    int face = cube_face(d, &sc, &tc);
+    int n = s->cube_n;
+    float texel_area = 4.0f / (float)(n * n);
+    float r2 = 1.0f + sc * sc + tc * tc;
+    return s->env_pmf[cube_texel(n, face, sc, tc)] / texel_area * r2 * sqrt(r2);
+}
+#endif
+
+#ifdef FEATURE_EMITTER_SAMPLING
+/* Strategy 4: an emitting triangle by P(t) ~ area x mean luminance of ke, then a point uniform on
+ * it (b0 = 1 - sqrt(u2), b1 = u3 sqrt(u2)). Returns the unit direction from x. */
+inline float3 sample_emitter(const SceneData* s, float3 x, float u1, float u2, float u3)
+{
+    int t = sample_cdf(s->em_cdf, s->num_emitters, u1);
+    float su = sqrt(u2);
+    float b0 = 1.0f - su, b1 = u3 * su;
+    float3 y = b0 * tri_vertex(s->em_v, t, 0) + b1 * tri_vertex(s->em_v, t, 1) +
+               (1.0f - b0 - b1) * tri_vertex(s->em_v, t, 2);
+    return normalize(y - x);
+}
+
+/* Solid-angle density of strategy 4 at direction d from x: every emitting triangle the ray
+ * crosses could have produced d, not only the first one hit ("all hits", MILO sec. 3.5), so the
+ * emitter BVH is traversed to the end and each crossing adds P(t)/area(t) dist^2 / |cos|. */
+inline float pdf_emitter(const SceneData* s, float3 x, float3 d)
+{
+    Ray r = make_ray(x, d);
+    float pdf = 0.0f;
+    int stack[BVH_STACK_SIZE];
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        int node = stack[--top];
+        float8 entry = bvh_lane_entry(s->em_bounds, node, &r, RAY_TMAX);
+        int8 child = s->em_children[2 * node], count = s->em_children[2 * node + 1];
+        for (int i = 0; i < 8; ++i) {
+            if (!(lane(entry, i) < INFINITY))
+                continue;
+            int n = lane_int(count, i), c = lane_int(child, i);
+            if (n == 0 && top < BVH_STACK_SIZE)
+                stack[top++] = c;
+            for (int slot = c; n > 0 && slot < c + n; ++slot) {
+                float3 v0 = tri_vertex(s->em_v, slot, 0), v1 = tri_vertex(s->em_v, slot, 1),
+                       v2 = tri_vertex(s->em_v, slot, 2);
+                float t, b1, b2;
+                if (intersect_triangle(&r, v0, v1, v2, RAY_TMAX, &t, &b1, &b2)) {
+                    float3 ng = normalize(cross(v1 - v0, v2 - v0));
+                    pdf += s->em_pdf_area[slot] * t * t / fabs(dot(ng, d));
+                }
+            }
+        }
+    }
+    return pdf;
+}
+#endif
+
+#endif

@@ -1,0 +1,81 @@
+"""Small scenes with known answers, built in code (no fixture files)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from invrender.scene.types import Camera, Maps, Mesh, Scene
+
+
+def icosphere(radius=1.0, center=(0, 0, 0), subdivisions=3):
+    t = (1 + 5**0.5) / 2
+    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+             (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
+             (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    v = np.array(verts, np.float64)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    f = np.array(faces)
+    for _ in range(subdivisions):
+        cache, verts_list, new_faces = {}, list(v), []
+
+        def midpoint(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in cache:
+                m = verts_list[a] + verts_list[b]
+                verts_list.append(m / np.linalg.norm(m))
+                cache[key] = len(verts_list) - 1
+            return cache[key]
+
+        for a, b, c in f:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            new_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        v, f = np.array(verts_list), np.array(new_faces)
+    return (v * radius + np.asarray(center)).astype(np.float32), f.astype(np.int32)
+
+
+def quad(center, u_axis, v_axis):
+    """Two triangles spanning center +- u_axis +- v_axis, front face towards u x v, UVs 0..1."""
+    c, u, v = (np.asarray(a, np.float64) for a in (center, u_axis, v_axis))
+    positions = np.array([c - u - v, c + u - v, c + u + v, c - u + v], np.float32)
+    faces = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    return positions, faces, uvs
+
+
+def merge(*parts):
+    """Concatenate (positions, faces, uvs) parts into one Mesh; instance id = part index + 1."""
+    positions, faces, uvs, ids, offset = [], [], [], [], 0
+    for index, (p, f, uv) in enumerate(parts):
+        positions.append(p)
+        faces.append(f + offset)
+        uvs.append(uv)
+        ids.append(np.full(len(f), index + 1, np.int32))
+        offset += len(p)
+    return Mesh(np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs),
+                np.concatenate(ids))
+
+
+def look_at_camera(eye, target, up=(0, 1, 0), width=48, height=36, fov_x_deg=50.0, name="cam", cx=None, cy=None):
+    """A PINHOLE camera at eye looking at target (OpenCV axes: x right, y down, z forward)."""
+    eye, target, up = (np.asarray(a, np.float64) for a in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)  # right = forward x up... for y down
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    f = 0.5 * width / np.tan(np.radians(fov_x_deg) / 2)
+    params = np.array([f, f, width / 2 if cx is None else cx, height / 2 if cy is None else cy])
+    return Camera(name, "PINHOLE", width, height, params, R, -R @ eye)
+
+
+def sphere_in_sky(kd=0.5, sky=1.0, subdivisions=3, atlas=(4, 4)):
+    """A diffuse unit sphere under a uniform sky: a convex object never sees itself, so with one
+    or more bounces every sphere pixel is kd * sky exactly (white furnace when kd = 1)."""
+    p, f = icosphere(1.0, subdivisions=subdivisions)
+    mesh = Mesh(p, f, np.full((len(p), 2), 0.5, np.float32), np.ones(len(f), np.int32))
+    maps = Maps.uniform(size=atlas, kd=kd, ks=0.0, ka=0.1, kg=sky, cube=4)
+    camera = look_at_camera((0, 0, 4), (0, 0, 0), width=32, height=32, fov_x_deg=40)
+    return Scene(mesh, maps, [camera])

@@ -1,0 +1,66 @@
+"""Kernel programs: sources assembled from kernels/, built with the scene's feature defines, and
+program binaries cached on disk by (source hash, build flags, device)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from functools import lru_cache
+from pathlib import Path
+
+import pyopencl as cl
+
+KERNEL_DIR = Path(__file__).resolve().parents[3] / "kernels"
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+def assemble_source(entry: str, kernel_dir: Path = KERNEL_DIR) -> str:
+    """Inline the local #include "x.h" lines once each, as the compiler would. Every file starts
+    with its own #line directive, so compiler errors still name the right file and line, and the
+    whole text (hence its hash) covers every header the program depends on."""
+    seen: set[str] = set()
+
+    def expand(name: str) -> str:
+        if name in seen:
+            return ""
+        seen.add(name)
+        text = (kernel_dir / name).read_text()
+        return _INCLUDE.sub(lambda match: expand(match.group(1)), text)
+
+    return expand(entry)
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("INVRENDER_CACHE") or Path.home() / ".cache" / "invrender"
+    return Path(root) / "kernels"
+
+
+def _cache_key(source: str, options: tuple[str, ...], device: cl.Device) -> str:
+    identity = "\n".join(
+        [source, " ".join(options), device.name, device.driver_version, device.platform.version, cl.VERSION_TEXT]
+    )
+    return hashlib.sha256(identity.encode()).hexdigest()
+
+
+def build_program(context: cl.Context, entry: str, options: tuple[str, ...] = ()) -> cl.Program:
+    return _build_cached(context, entry, tuple(options))
+
+
+@lru_cache(maxsize=64)
+def _build_cached(context: cl.Context, entry: str, options: tuple[str, ...]) -> cl.Program:
+    device = context.devices[0]
+    source = assemble_source(entry)
+    path = cache_dir() / f"{_cache_key(source, options, device)}.bin"
+    if path.exists():
+        try:
+            return cl.Program(context, [device], [path.read_bytes()]).build(options=list(options))
+        except cl.Error:
+            path.unlink(missing_ok=True)  # stale or corrupt binary: rebuild below
+    program = cl.Program(context, source).build(options=list(options))
+    binary = program.get_info(cl.program_info.BINARIES)[0]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_suffix(f".tmp{os.getpid()}")
+    temporary.write_bytes(binary)
+    temporary.replace(path)  # atomic: a concurrent reader never sees half a binary
+    return program

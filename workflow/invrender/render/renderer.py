@@ -1,0 +1,113 @@
+"""The forward renderer: a Scene, its features and a device in; radiance and AOVs out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+from tqdm import tqdm
+
+from ..scene.types import Camera, Scene
+from .device import context_and_queue
+from .features import Features
+from .program import build_program
+from .scene_buffers import HostScene, pack_cameras
+
+LOCAL_SIZE = 64
+SAMPLES_PER_LAUNCH = 2_000_000  # path samples per kernel launch: keeps launches short on GPUs
+
+
+def pixel_requests(camera: Camera, camera_index: int = 0, ray_offset: int = 0) -> np.ndarray:
+    """int4 (camera, x, y, ray id) for every pixel, row by row; ray id = ray_offset + y W + x."""
+    ys, xs = np.mgrid[0 : camera.height, 0 : camera.width]
+    ids = ray_offset + ys * camera.width + xs
+    return np.stack([np.full_like(xs, camera_index), xs, ys, ids], -1).reshape(-1, 4).astype(np.int32)
+
+
+class Renderer:
+    """Renders a scene with kernels built for its features (analysed if not given).
+
+    w_env and w_emit are the mixture weights of the environment and emitter strategies
+    (MILO uses 0.25 each); they apply only when the feature is compiled in.
+    """
+
+    def __init__(self, scene: Scene, features: Features | None = None, device: str | None = None,
+                 w_env: float = 0.25, w_emit: float = 0.25, host_scene: HostScene | None = None):
+        if features is None:
+            from .features import analyse
+
+            features = analyse(scene)
+        self.scene, self.features = scene, features
+        self.context, self.queue = context_and_queue(device)
+        self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
+        self.scene_args = self.host.upload(self.context) + [np.float32(w_env), np.float32(w_emit)]
+        self.program = build_program(self.context, "render.cl", features.defines())
+
+    # --- buffers -------------------------------------------------------------------------
+    def _buffer(self, array: np.ndarray) -> cl.Buffer:
+        return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array))
+
+    def _zeros(self, shape, dtype=np.float32) -> tuple[np.ndarray, cl.Buffer]:
+        host = np.zeros(shape, dtype)
+        return host, cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=host)
+
+    def _global_size(self, n: int) -> tuple[int]:
+        return (max(LOCAL_SIZE, -(-n // LOCAL_SIZE) * LOCAL_SIZE),)
+
+    def ray_offset(self, camera: Camera) -> int:
+        """Ray ids continue across the scene's cameras, so no two pixels share random numbers."""
+        offset = 0
+        for cam in self.scene.cameras:
+            if cam.name == camera.name:
+                return offset
+            offset += cam.width * cam.height
+        return 0
+
+    # --- rendering -----------------------------------------------------------------------
+    def render_requests(self, cameras: list[Camera], requests: np.ndarray, spp: int, seed: int = 0,
+                        progress: bool = False) -> tuple[np.ndarray, np.ndarray, int]:
+        """Mean radiance (n, 3), the variance of that mean (n, 3), and the count of non-finite
+        samples dropped (0 unless something is wrong), for int4 requests (camera, x, y, ray id)."""
+        n = len(requests)
+        cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
+        accum, accum_buf = self._zeros((n, 4))
+        accum_sq, accum_sq_buf = self._zeros((n, 4))
+        per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
+        kernel = self.program.render_rays
+        starts = range(0, spp, per_launch)
+        for start in tqdm(starts, desc="render", unit="launch", disable=not progress, leave=False):
+            count = min(per_launch, spp - start)
+            kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
+                   np.int32(n), np.uint64(seed), np.uint32(start), np.uint32(count), accum_buf, accum_sq_buf)
+        cl.enqueue_copy(self.queue, accum, accum_buf)
+        cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
+        dropped = int(accum[:, 3].sum())
+        kept = np.maximum(spp - accum[:, 3:4], 1)
+        mean = accum[:, :3] / kept
+        variance = np.maximum(accum_sq[:, :3] / kept - mean**2, 0) / kept
+        return mean.astype(np.float32), variance.astype(np.float32), dropped
+
+    def aovs(self, cameras: list[Camera], requests: np.ndarray) -> dict[str, np.ndarray]:
+        n = len(requests)
+        cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
+        out = {"depth": self._zeros(n), "normal": self._zeros((n, 4)), "uv": self._zeros((n, 2)),
+               "instance_id": self._zeros(n, np.int32), "triangle_id": self._zeros(n, np.int32)}
+        self.program.primary_aovs(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
+                                  np.int32(n), *(buf for _, buf in out.values()))
+        for host, buf in out.values():
+            cl.enqueue_copy(self.queue, host, buf)
+        result = {name: host for name, (host, _) in out.items()}
+        result["normal"] = result["normal"][:, :3]
+        return result
+
+    def render(self, camera: Camera, spp: int = 64, seed: int = 0, aovs: bool = True,
+               progress: bool = False) -> dict[str, np.ndarray]:
+        """One image: 'radiance' (H, W, 3), 'variance' of each pixel's mean, and with aovs
+        'depth', 'normal', 'uv', 'instance_id', 'triangle_id' (H, W, ...)."""
+        requests = pixel_requests(camera, 0, self.ray_offset(camera))
+        mean, variance, dropped = self.render_requests([camera], requests, spp, seed, progress)
+        shape = (camera.height, camera.width)
+        out = {"radiance": mean.reshape(*shape, 3), "variance": variance.reshape(*shape, 3), "dropped": dropped}
+        if aovs:
+            for name, value in self.aovs([camera], requests).items():
+                out[name] = value.reshape(*shape, *value.shape[1:])
+        return out

@@ -1,0 +1,183 @@
+"""A Scene packed into the device buffers the kernels read (SceneData in kernels/common.h).
+
+Triangles are stored in BVH leaf order; the emitting triangles get a BVH of their own for the
+all-hits density of sampling strategy 4; the cube map gets its sampling distribution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from ..scene.types import Camera, Maps, Mesh
+from .bvh import WideBVH, build_bvh, triangle_vertices
+from .sampling import cube_texel_solid_angles
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+# kernels/camera.h CameraData: 24 four-byte fields, no padding on any OpenCL device.
+CAMERA_DTYPE = np.dtype(
+    [("R", "<f4", 9), ("C", "<f4", 3), ("f", "<f4", 2), ("c", "<f4", 2), ("k", "<f4", 4),
+     ("width", "<i4"), ("height", "<i4"), ("distorted", "<i4"), ("pad", "<i4")]
+)
+
+
+def pack_cameras(cameras: list[Camera]) -> np.ndarray:
+    packed = np.zeros(len(cameras), CAMERA_DTYPE)
+    for record, cam in zip(packed, cameras):
+        record["R"] = np.asarray(cam.R, np.float64).ravel()
+        record["C"] = cam.center  # in float64, then rounded once
+        record["f"] = cam.focal
+        record["c"] = cam.principal_point
+        record["k"] = cam.distortion
+        record["width"], record["height"] = cam.width, cam.height
+        record["distorted"] = int(np.any(cam.distortion != 0))
+    return packed
+
+
+def pack_material(maps: Maps) -> np.ndarray:
+    """Three float4 per texel: [kd, ka], [ks, kw], [ke, 0] (Material in kernels/common.h)."""
+    h, w = maps.atlas_shape
+    packed = np.zeros((h * w, 3, 4), np.float32)
+    packed[:, 0, :3] = maps.kd.reshape(-1, 3)
+    packed[:, 0, 3] = maps.ka.reshape(-1)
+    packed[:, 1, :3] = maps.ks.reshape(-1, 3)
+    packed[:, 1, 3] = maps.kw.reshape(-1)
+    packed[:, 2, :3] = maps.ke.reshape(-1, 3)
+    return packed
+
+
+def atlas_lookup(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Nearest texel, as kernels/textures.h: column floor(u W), row floor((1 - v) H)."""
+    h, w = image.shape[:2]
+    col = np.clip(np.floor(uv[..., 0] * w).astype(np.int64), 0, w - 1)
+    row = np.clip(np.floor((1.0 - uv[..., 1]) * h).astype(np.int64), 0, h - 1)
+    return image[row, col]
+
+
+def _barycentric_grid(levels: int = 8) -> np.ndarray:
+    """Centroids of the levels^2 congruent sub-triangles: an even cover of a triangle."""
+    points = []
+    for i in range(levels):
+        for j in range(levels - i):
+            points.append(((i + 1 / 3) / levels, (j + 1 / 3) / levels))
+            if i + j < levels - 1:
+                points.append(((i + 2 / 3) / levels, (j + 2 / 3) / levels))
+    b = np.array(points)
+    return np.column_stack([1 - b.sum(1), b])
+
+
+def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
+    """area x mean luminance of ke over each triangle (sampling strategy 4's weights)."""
+    v0, v1, v2 = (mesh.positions[mesh.faces[:, k]].astype(np.float64) for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(v1 - v0, v2 - v0), axis=1)
+    bary = _barycentric_grid()
+    uv = np.einsum("pk,fkc->fpc", bary, mesh.uvs[mesh.faces].astype(np.float64))
+    ke = atlas_lookup(maps.ke, uv) @ LUMINANCE
+    power = area * ke.mean(axis=1)
+    return np.where(np.isfinite(power), power, 0.0)
+
+
+def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P(texel) ~ luminance x solid angle over the 6 N N cube texels, and its inclusive CDF."""
+    n = kg.shape[1]
+    weight = (kg.reshape(6, n, n, 3) @ LUMINANCE) * cube_texel_solid_angles(n)
+    weight = np.maximum(weight.ravel(), 0.0)
+    if weight.sum() <= 0:  # black sky: any valid density will do, the feature is off anyway
+        weight = cube_texel_solid_angles(n).ravel()
+    pmf = weight / weight.sum()
+    cdf = np.cumsum(pmf)
+    cdf[-1] = 1.0
+    return pmf.astype(np.float32), cdf.astype(np.float32)
+
+
+def _empty_bvh() -> WideBVH:
+    bounds = np.empty((1, 6, 8), np.float32)
+    bounds[:, :3], bounds[:, 3:] = np.inf, -np.inf
+    children = np.zeros((1, 2, 8), np.int32)
+    children[:, 1] = -1
+    return WideBVH(bounds, children, np.zeros(0, np.int32))
+
+
+def _as_float4(points: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(points), 4), np.float32)
+    out[:, :3] = points
+    return out
+
+
+@dataclass
+class HostScene:
+    """Everything the kernels read, as numpy arrays in SCENE_PARAMS order (kernels/common.h)."""
+
+    tri_v: np.ndarray
+    tri_uv: np.ndarray
+    tri_id: np.ndarray
+    tri_instance: np.ndarray
+    bvh_bounds: np.ndarray
+    bvh_children: np.ndarray
+    material: np.ndarray
+    atlas_w: int
+    atlas_h: int
+    kg: np.ndarray
+    cube_n: int
+    env_cdf: np.ndarray
+    env_pmf: np.ndarray
+    em_v: np.ndarray
+    em_cdf: np.ndarray
+    em_pdf_area: np.ndarray
+    num_emitters: int
+    em_bounds: np.ndarray
+    em_children: np.ndarray
+    bvh: WideBVH
+
+    @classmethod
+    def pack(cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None) -> "HostScene":
+        v0, v1, v2 = triangle_vertices(mesh.positions, mesh.faces)
+        bvh = bvh or build_bvh(v0, v1, v2)
+        order = bvh.tri_order
+        tri_v = _as_float4(np.stack([v0[order], v1[order], v2[order]], axis=1).reshape(-1, 3))
+        tri_uv = mesh.uvs[mesh.faces[order]].reshape(-1, 2).astype(np.float32)
+        instances = mesh.instance_ids if mesh.instance_ids is not None else np.zeros(len(mesh.faces), np.int32)
+
+        power = emitted_power(mesh, maps)
+        emitters = np.flatnonzero(power > 0)
+        em_bvh = build_bvh(v0[emitters], v1[emitters], v2[emitters]) if len(emitters) else _empty_bvh()
+        em_order = emitters[em_bvh.tri_order]  # emitter-BVH slot -> original triangle
+        em_area = 0.5 * np.linalg.norm(np.cross(v1[em_order] - v0[em_order], v2[em_order] - v0[em_order]), axis=1)
+        em_pmf = power[em_order] / max(power[em_order].sum(), 1e-300)
+        em_cdf = np.cumsum(em_pmf)
+        if len(em_cdf):
+            em_cdf[-1] = 1.0
+        env_pmf, env_cdf = environment_distribution(maps.kg)
+        h, w = maps.atlas_shape
+        return cls(
+            tri_v=tri_v, tri_uv=tri_uv, tri_id=order.astype(np.int32),
+            tri_instance=instances[order].astype(np.int32),
+            bvh_bounds=bvh.bounds, bvh_children=bvh.children, material=pack_material(maps),
+            atlas_w=w, atlas_h=h, kg=_as_float4(maps.kg.reshape(-1, 3)), cube_n=maps.kg.shape[1],
+            env_cdf=env_cdf, env_pmf=env_pmf,
+            em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
+            em_cdf=em_cdf.astype(np.float32), em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
+            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children, bvh=bvh,
+        )
+
+    def upload(self, context: cl.Context) -> list:
+        """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers."""
+        args = []
+        for name in SCENE_ARG_ORDER:
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray):
+                data = np.ascontiguousarray(value if value.size else np.zeros(4, value.dtype))
+                args.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data))
+            else:
+                args.append(np.int32(value))
+        return args
+
+
+SCENE_ARG_ORDER = (
+    "tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children", "material",
+    "atlas_w", "atlas_h", "kg", "cube_n", "env_cdf", "env_pmf", "em_v", "em_cdf", "em_pdf_area",
+    "num_emitters", "em_bounds", "em_children",
+)
