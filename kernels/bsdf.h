@@ -56,23 +56,12 @@ inline float3 bsdf_cos(const Material* m, float3 n, float3 wo, float3 wi)
     return f;
 }
 
-/* Strategy 1: cosine-weighted hemisphere (Malley: concentric disk, Shirley and Chiu 1997). */
+/* Strategy 1: cosine-weighted hemisphere (Malley's method: a uniform disk point, polar mapping,
+ * lifted to the hemisphere), the same mapping as the reference so samples compare one to one. */
 inline float3 sample_cosine(float3 n, float u1, float u2)
 {
-    float a = 2.0f * u1 - 1.0f, b = 2.0f * u2 - 1.0f;
-    float r, phi;
-    if (a == 0.0f && b == 0.0f) {
-        r = 0.0f;
-        phi = 0.0f;
-    } else if (fabs(a) > fabs(b)) {
-        r = a;
-        phi = (PI_F / 4.0f) * (b / a);
-    } else {
-        r = b;
-        phi = (PI_F / 2.0f) - (PI_F / 4.0f) * (a / b);
-    }
-    float x = r * cos(phi), y = r * sin(phi);
-    return to_world((float3)(x, y, safe_sqrt(1.0f - x * x - y * y)), n);
+    float r = sqrt(u1), phi = 2.0f * PI_F * u2;
+    return to_world((float3)(r * cos(phi), r * sin(phi), safe_sqrt(1.0f - u1)), n);
 }
 
 inline float pdf_cosine(float3 n, float3 wi) { return fmax(dot(n, wi), 0.0f) * INV_PI; }
@@ -81,7 +70,7 @@ inline float pdf_cosine(float3 n, float3 wi) { return fmax(dot(n, wi), 0.0f) * I
  * the surface (the sample is spent; pdf_specular integrates to the success probability). */
 inline float3 sample_specular(float3 n, float3 wo, float ka, float u1, float u2)
 {
-    float tan2 = -ka * log(1.0f - u1);
+    float tan2 = -ka * log1p(-u1);
     float cos_h = rsqrt(1.0f + tan2);
     float sin_h = sqrt(tan2) * cos_h;
     float phi = 2.0f * PI_F * u2;
