@@ -58,6 +58,10 @@ inline void edge_functions_fp64(float3 a, float3 b, float3 c, float* U, float* V
 inline int intersect_triangle(const Ray* r, float3 v0, float3 v1, float3 v2, float tmax,
                               float* t, float* b1, float* b2)
 {
+/* Watertightness needs an edge function shared by two triangles to come out as exact negatives
+ * of each other; a fused multiply-add in a*b - c*d rounds the two orders differently and lets
+ * rays through shared edges (measured: 4 of 392 rays through edges of a flat grid). */
+#pragma OPENCL FP_CONTRACT OFF
     float3 a = rotate_to_z(v0 - r->o, r->kz);
     float3 b = rotate_to_z(v1 - r->o, r->kz);
     float3 c = rotate_to_z(v2 - r->o, r->kz);
