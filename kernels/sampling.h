@@ -9,8 +9,9 @@ typedef struct {
     float diffuse, specular, env, emit;
 } MixtureWeights;
 
-/* The BSDF share (1 - w_env - w_emit) is split by the lobes' largest albedo channels, so a lobe
- * with any reflectance is always sampled with some probability (no unbiasedness lost). */
+/* The BSDF share (1 - w_env - w_emit) is split by the lobes' luminance (F at normal incidence is
+ * ks): all three Rec. 709 weights are positive, so a lobe with any reflectance is sampled with
+ * some probability and no unbiasedness is lost. */
 inline MixtureWeights mixture_weights(const SceneData* s, const Material* m)
 {
     MixtureWeights w = {0.0f, 0.0f, 0.0f, 0.0f};
@@ -20,9 +21,9 @@ inline MixtureWeights mixture_weights(const SceneData* s, const Material* m)
 #ifdef FEATURE_EMITTER_SAMPLING
     w.emit = s->w_emit;
 #endif
-    float d = max3(m->kd), sp = 0.0f;
+    float d = luminance(m->kd), sp = 0.0f;
 #ifdef FEATURE_SPECULAR
-    sp = max3(m->ks);
+    sp = luminance(m->ks);
 #endif
     float share = 1.0f - w.env - w.emit;
     if (d + sp > 0.0f) {
