@@ -79,3 +79,46 @@ def sphere_in_sky(kd=0.5, sky=1.0, subdivisions=3, atlas=(4, 4)):
     maps = Maps.uniform(size=atlas, kd=kd, ks=0.0, ka=0.1, kg=sky, cube=4)
     camera = look_at_camera((0, 0, 4), (0, 0, 0), width=32, height=32, fov_x_deg=40)
     return Scene(mesh, maps, [camera])
+
+
+def inside_sphere(kd=0.5, ke=1.0, subdivisions=2):
+    """A closed sphere that emits ke and reflects kd everywhere, seen from inside: by the
+    rendering equation L = ke + kd L at every point, so with B bounces
+    L = ke (1 - kd^(B+1)) / (1 - kd) exactly (the furnace of multi-bounce light)."""
+    p, f = icosphere(1.0, subdivisions=subdivisions)
+    mesh = Mesh(p, f, np.full((len(p), 2), 0.5, np.float32), np.ones(len(f), np.int32))
+    maps = Maps.uniform(size=(2, 2), kd=kd, ks=0.0, ka=0.1, ke=ke, kg=0.0, cube=2)
+    camera = look_at_camera((0.1, -0.2, 0.3), (0.0, 0.0, -1.0), width=24, height=18, fov_x_deg=70)
+    return Scene(mesh, maps, [camera])
+
+
+def box_room(kd=(0.6, 0.5, 0.4), light=8.0, ks=0.0, ka=0.1, size=(32, 24), window=False, sky=2.0):
+    """A closed 4 x 2.6 x 3 m box seen from inside, a ceiling light (texel 1) and a diffuse box
+    on the floor; with window=True a window quad in the +X wall (kw = 1, texel 2) shows a sky.
+    Atlas: 2 x 2 texels, texel 0 = walls/floor/box, 1 = light, 2 = window."""
+    W, H, D = 2.0, 2.6, 1.5
+    parts = [
+        quad((0, 0, 0), (0, 0, D), (W, 0, 0)),  # floor, front +Y
+        quad((0, H, 0), (W, 0, 0), (0, 0, D)),  # ceiling, front -Y
+        quad((0, H / 2, -D), (W, 0, 0), (0, H / 2, 0)),  # back wall, front +Z
+        quad((0, H / 2, D), (0, H / 2, 0), (W, 0, 0)),  # front wall, front -Z
+        quad((-W, H / 2, 0), (0, H / 2, 0), (0, 0, D)),  # left wall, front +X
+        quad((W, H / 2, 0), (0, 0, D), (0, H / 2, 0)),  # right wall, front -X
+        quad((0.3, H - 0.01, 0.2), (0.5, 0, 0), (0, 0, 0.4)),  # light, facing down
+        quad((-0.8, 0.4, -0.3), (0.3, 0, 0), (0, 0, 0.3)),  # top of a little table
+    ]
+    texel_uv = {0: (0.25, 0.75), 1: (0.75, 0.75), 2: (0.25, 0.25)}
+    uv_of = [0, 0, 0, 0, 0, 0, 1, 0]
+    if window:
+        parts.append(quad((W - 0.005, 1.4, 0.0), (0, 0.5, 0), (0, 0, 0.6)))  # in front of +X wall
+        uv_of.append(2)
+    positions = np.concatenate([p for p, _, _ in parts]).astype(np.float32)
+    faces = np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(parts)]).astype(np.int32)
+    uvs = np.concatenate([np.full((4, 2), texel_uv[t]) for t in uv_of]).astype(np.float32)
+    maps = Maps.uniform(size=(2, 2), kd=0.0, ks=0.0, ka=ka, kg=sky if window else 0.0, cube=4)
+    maps.kd[0, 0], maps.ks[0, 0] = kd, ks
+    maps.ke[0, 1] = light
+    maps.kw[1, 0] = 1.0
+    camera = look_at_camera((-1.2, 1.4, 1.2), (0.5, 0.8, -0.8), width=size[0], height=size[1], fov_x_deg=75)
+    ids = np.repeat(np.arange(len(parts)) + 1, 2).astype(np.int32)
+    return Scene(Mesh(positions, faces, uvs, ids), maps, [camera])

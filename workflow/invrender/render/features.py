@@ -81,51 +81,38 @@ def bounces_for(rho: float, settings: AnalysisSettings) -> int:
     return settings.max_bounces
 
 
-def is_open(mesh) -> bool:
-    """True if some edge borders one face only (positions welded, so UV seams do not count):
-    rays can then leave the scene and see kg."""
-    _, welded = np.unique(np.round(mesh.positions.astype(np.float64), 7), axis=0, return_inverse=True)
-    faces = welded.reshape(-1)[mesh.faces]
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    edges = edges[edges[:, 0] != edges[:, 1]]
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    return bool(np.any(counts == 1))
+def preview_camera(camera, max_width: int = 48):
+    """The same view at a small resolution (intrinsics scaled with the image)."""
+    from ..scene.types import Camera
+
+    scale = min(1.0, max_width / camera.width)
+    params = np.array(camera.params, np.float64)
+    params[: 4 if camera.model != "SIMPLE_PINHOLE" else 3] *= scale
+    return Camera(camera.name, camera.model, max(1, round(camera.width * scale)), max(1, round(camera.height * scale)),
+                  params, camera.R, camera.t)
 
 
-def crossings(mesh, origin, direction) -> int:
-    """How many triangles the ray origin + s direction (s > 0) crosses (Moeller-Trumbore, float64)."""
-    v0, v1, v2 = (mesh.positions[mesh.faces[:, k]].astype(np.float64) for k in range(3))
-    e1, e2 = v1 - v0, v2 - v0
-    p = np.cross(direction, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-300
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = origin - v0
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = (q @ direction) * inv
-    t = np.einsum("ij,ij->i", e2, q) * inv
-    return int(np.count_nonzero(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)))
-
-
-def encloses(mesh, point) -> bool:
-    """Parity of crossings along three fixed, irrational directions; the majority decides, so a
-    ray through an edge cannot flip the answer."""
-    directions = np.array([[0.5773, 0.5774, 0.5774], [-0.2673, 0.8018, -0.5345], [0.8729, -0.2182, 0.4364]])
-    odd = sum(crossings(mesh, np.asarray(point, np.float64), d / np.linalg.norm(d)) % 2 for d in directions)
-    return odd >= 2
-
-
-def rays_can_escape(scene) -> bool:
-    """Rays reach kg from outside the mesh when the mesh has a border, or when a camera stands
-    outside it (an object seen from around it). A camera inside a closed room sees kg only
-    through windows. No cameras: assume the worst."""
-    if is_open(scene.mesh) or not scene.cameras:
+def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = None) -> bool:
+    """Whether paths from the cameras reach the space outside the mesh (and so see kg) within a
+    few bounces: rendered, not guessed from the mesh, since an open lamp quad inside a closed
+    room is no way out while a closed object seen from around it is. A white scene under a white
+    sky and no other light: any radiance at all is light that came from outside. A hole smaller
+    than the preview's sampling can be missed; windows count through kw, not here. Without
+    cameras nothing is known: assume rays escape."""
+    if not scene.cameras:
         return True
-    return not all(encloses(scene.mesh, camera.center) for camera in scene.cameras)
+    from ..scene.types import Maps, Scene
+    from .renderer import Renderer
+
+    probe = Scene(scene.mesh, Maps.uniform(size=(1, 1), kd=1.0, ks=0.0, kg=1.0, cube=1), scene.cameras)
+    features = Features(specular=False, emission=False, emitter_sampling=False, environment=True, window=False,
+                        env_sampling=False, max_bounces=bounces)
+    renderer = Renderer(probe, features, device=device)
+    return any(renderer.render(preview_camera(c), spp=spp, aovs=False)["radiance"].max() > 0 for c in scene.cameras)
 
 
-def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None):
+def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+                  device: str | None = None):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""
     from .bsdf import max_albedo
     from .scene_buffers import emitted_power
@@ -137,7 +124,7 @@ def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overri
     emission = bool(maps.ke.max() > 0)
     sky = bool(maps.kg.max() > 0)
     window = sky and bool(maps.kw.max() > 0)
-    escape = rays_can_escape(scene)
+    escape = sky and rays_can_escape(scene, device=device)
     environment = sky and (window or escape)
     ks_effective = maps.ks if specular else np.zeros_like(maps.ks)
     rho = float(max_albedo(maps.kd, ks_effective, maps.ka).max())
@@ -155,5 +142,6 @@ def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overri
     return features, evidence
 
 
-def analyse(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None) -> Features:
-    return analyse_scene(scene, settings, overrides)[0]
+def analyse(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+            device: str | None = None) -> Features:
+    return analyse_scene(scene, settings, overrides, device)[0]

@@ -39,7 +39,7 @@ class Renderer:
         self.scene, self.features = scene, features
         self.context, self.queue = context_and_queue(device)
         self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
-        self.scene_args = self.host.upload(self.context) + [np.float32(w_env), np.float32(w_emit)]
+        self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(w_env, w_emit))
         self.program = build_program(self.context, "render.cl", features.defines())
 
     # --- buffers -------------------------------------------------------------------------

@@ -80,17 +80,19 @@ def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
     return np.where(np.isfinite(power), power, 0.0)
 
 
-def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """P(texel) ~ luminance x solid angle over the 6 N N cube texels, and its inclusive CDF."""
+def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """P(texel) ~ luminance x solid angle over the 6 N N cube texels, its inclusive CDF, and
+    whether the sky is black (then the distribution is uniform and must get weight 0)."""
     n = kg.shape[1]
     weight = (kg.reshape(6, n, n, 3) @ LUMINANCE) * cube_texel_solid_angles(n)
     weight = np.maximum(weight.ravel(), 0.0)
-    if weight.sum() <= 0:  # black sky: any valid density will do, the feature is off anyway
+    black = not weight.sum() > 0
+    if black:  # any valid density will do: it gets weight 0
         weight = cube_texel_solid_angles(n).ravel()
     pmf = weight / weight.sum()
     cdf = np.cumsum(pmf)
     cdf[-1] = 1.0
-    return pmf.astype(np.float32), cdf.astype(np.float32)
+    return pmf.astype(np.float32), cdf.astype(np.float32), black
 
 
 def _empty_bvh() -> WideBVH:
@@ -131,6 +133,7 @@ class HostScene:
     em_bounds: np.ndarray
     em_children: np.ndarray
     bvh: WideBVH
+    env_black: bool
 
     @classmethod
     def pack(cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None) -> "HostScene":
@@ -150,7 +153,7 @@ class HostScene:
         em_cdf = np.cumsum(em_pmf)
         if len(em_cdf):
             em_cdf[-1] = 1.0
-        env_pmf, env_cdf = environment_distribution(maps.kg)
+        env_pmf, env_cdf, env_black = environment_distribution(maps.kg)
         h, w = maps.atlas_shape
         return cls(
             tri_v=tri_v, tri_uv=tri_uv, tri_id=order.astype(np.int32),
@@ -161,7 +164,13 @@ class HostScene:
             em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
             em_cdf=em_cdf.astype(np.float32), em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
             num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children, bvh=bvh,
+            env_black=env_black,
         )
+
+    def strategy_weights(self, w_env: float, w_emit: float) -> tuple[np.float32, np.float32]:
+        """The kernel arguments w_env, w_emit: a strategy with nothing to sample gets weight 0,
+        so its share goes to the BSDF lobes instead of to directions it cannot draw."""
+        return np.float32(0.0 if self.env_black else w_env), np.float32(w_emit if self.num_emitters > 0 else 0.0)
 
     def upload(self, context: cl.Context) -> list:
         """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers."""
