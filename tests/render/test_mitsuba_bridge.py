@@ -18,6 +18,8 @@ SCALAR = "scalar_rgb"
 
 
 def _llvm_works() -> bool:
+    if not mb.llvm_available():  # an unsuitable libLLVM aborts the process: do not even try
+        return False
     try:
         mb.set_variant(LLVM)
         return float(np.array(mi.Float([1.0, 2.0]) * 2.0).sum()) == 6.0
@@ -25,7 +27,8 @@ def _llvm_works() -> bool:
         return False
 
 
-VARIANTS = [LLVM] if _llvm_works() else [SCALAR]
+VARIANTS = [LLVM] if _llvm_works() else [SCALAR]  # for renders: llvm when it works
+BOTH = [SCALAR] + ([LLVM] if LLVM in VARIANTS else [])  # for cheap checks: every variant we can
 
 
 # ---------------------------------------------------------------------------------------------
@@ -134,9 +137,10 @@ def test_white_furnace(variant):
     # kd = 1, ks = 0: with the F90 clamp the material is exactly Lambertian and conserves energy.
     scene = Scene(uv_sphere(), Maps.uniform(size=(8, 8), kd=1.0, ks=0.0, ka=0.1, kg=1.0, cube=4))
     camera = look_at_camera([0.0, 0.0, 3.5], [0.0, 0.0, 0.0], width=24, height=24, params=[30, 30, 12, 12])
-    image = mb.render_mitsuba(scene, camera, 4, spp=16, variant=variant, envmap_size=(64, 32))
+    image = mb.render_mitsuba(scene, camera, 4, spp=64, variant=variant, envmap_size=(64, 32))
     inside = sphere_interior_mask(camera, 0.98)
-    assert np.allclose(image[inside].mean(), 1.0, atol=0.002)
+    # per-pixel noise (MIS with environment sampling) ~0.03 at 64 spp: the mean's is ~0.0015
+    assert np.allclose(image[inside].mean(), 1.0, atol=0.006)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -166,6 +170,8 @@ def weighted_centroid(image):
 @pytest.mark.parametrize("variant", VARIANTS)
 @pytest.mark.parametrize("kind", list(CAMERAS))
 def test_camera_projects_like_colmap(variant, kind):
+    if variant == SCALAR and kind != "perspective":
+        pytest.skip("the Python sensor costs a Python call per sample in scalar_rgb (its rays are checked below)")
     model, params = CAMERAS[kind]
     camera = look_at_camera([0.4, 0.3, -2.0], [0.0, 0.1, 1.0], up=(0.1, 1.0, 0.0), width=32, height=24, params=params, model=model)
     x_axis, y_axis = camera.R[0], camera.R[1]  # camera right and down in world
@@ -186,7 +192,7 @@ def test_camera_projects_like_colmap(variant, kind):
         assert np.allclose(weighted_centroid(image), weighted_centroid(expected), atol=0.02), (kind, point)
 
 
-@pytest.mark.parametrize("variant", [SCALAR] + ([LLVM] if LLVM in VARIANTS else []))
+@pytest.mark.parametrize("variant", BOTH)
 @pytest.mark.parametrize("kind", list(CAMERAS))
 def test_camera_ray_through_a_pixel_hits_what_projects_there(variant, kind):
     model, params = CAMERAS[kind]
@@ -244,7 +250,7 @@ def test_one_hot_cube_texels_seen_in_their_direction(variant):
             assert np.allclose(image[int(px[1]), int(px[0])], 0.0, atol=1e-4), (face, dc, dr_)
 
 
-@pytest.mark.parametrize("variant", [SCALAR] + ([LLVM] if LLVM in VARIANTS else []))
+@pytest.mark.parametrize("variant", BOTH)
 def test_envmap_pixel_directions_match_mitsuba(variant):
     # Each pixel of a small lat-long image holds a distinct value; Mitsuba, asked for the
     # radiance along the direction the bridge assigns to a pixel, must return exactly it.
@@ -317,8 +323,11 @@ def _reference_bsdf_cos(wo, wi, kd, ks, ka):
 
 
 def _bsdf_and_si(variant, kd, ks, ka, wo):
+    """The plugin and, in a JIT variant, one SurfaceInteraction per viewer direction wo."""
     mb.set_variant(variant)
     bsdf = mi.load_dict(mb.milo_bsdf(kd, ks, ka))
+    if variant == SCALAR:
+        return bsdf, None
     si = dr.zeros(mi.SurfaceInteraction3f, len(wo))
     si.wi = mi.Vector3f(*(np.asarray(wo, np.float32).T))
     si.uv = mi.Point2f(0.5, 0.5)
@@ -330,7 +339,7 @@ def _random_directions(rng, count):
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", BOTH)
 @pytest.mark.parametrize("kd,ks,ka", [((0.3, 0.5, 0.7), (0.04, 0.5, 0.9), 0.08), ((0.8, 0.1, 0.0), (0.0, 0.01, 0.3), 0.6), ((0.2, 0.2, 0.2), (0.9, 0.9, 0.9), 0.002)])
 def test_milo_eval_matches_the_formula(variant, kd, ks, ka):
     rng = np.random.default_rng(3)
@@ -352,12 +361,12 @@ def test_milo_eval_matches_the_formula(variant, kd, ks, ka):
 
 def _scalar_eval(bsdf, wo, wi):
     si = dr.zeros(mi.SurfaceInteraction3f)
-    si.wi = mi.Vector3f(*wo)
+    si.wi = mi.Vector3f(*(float(c) for c in wo))
     si.uv = mi.Point2f(0.5, 0.5)
-    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi)))
+    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(float(c) for c in wi))))
 
 
-@pytest.mark.parametrize("variant", [SCALAR] + ([LLVM] if LLVM in VARIANTS else []))
+@pytest.mark.parametrize("variant", BOTH)
 def test_milo_sample_is_consistent_with_eval_and_pdf(variant):
     rng = np.random.default_rng(4)
     count = 20_000 if variant == LLVM else 60

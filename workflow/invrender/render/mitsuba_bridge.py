@@ -73,7 +73,15 @@ if "DRJIT_LIBLLVM_PATH" not in os.environ and (_libllvm := _find_libllvm()):
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
-DEFAULT_VARIANT = "llvm_ad_rgb"
+
+def llvm_available() -> bool:
+    """Whether drjit's LLVM backend has a library it works with (FACTS.md: >= 16 on Debian)."""
+    path = os.environ.get("DRJIT_LIBLLVM_PATH")
+    return bool(path) and os.path.exists(path)
+
+
+# llvm_ad_rgb is ~70x faster with the Python plugins (vectorised); scalar_rgb works everywhere.
+DEFAULT_VARIANT = "llvm_ad_rgb" if llvm_available() else "scalar_rgb"
 # Lat-long width per cube face texel: Mitsuba interpolates the lat-long image bilinearly, and with
 # 32 lat-long pixels per cube texel row (at least 1024) the irradiance from a white-noise kg
 # (the worst case) moves by < 0.1 % (measured: N = 8..64 -> 0.04-0.07 %).
