@@ -23,6 +23,7 @@ class KernelProbe:
         self.context, self.queue = context_and_queue(None)
         self.program = build_program(self.context, "probe.cl", features.defines())
         self.scene_args = None
+        self.kernels = {}
         if scene is not None:
             host = HostScene.pack(scene.mesh, scene.maps)
             self.host = host
@@ -35,7 +36,9 @@ class KernelProbe:
     def _run(self, name, n, inputs, outputs, scene=False):
         bufs = [cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, max(o.nbytes, 16)) for o in outputs]
         args = (list(self.scene_args) if scene else []) + list(inputs) + bufs
-        getattr(self.program, name)(self.queue, (n,), None, *args)
+        if name not in self.kernels:
+            self.kernels[name] = cl.Kernel(self.program, name)
+        self.kernels[name](self.queue, (n,), None, *args)
         for host, buf in zip(outputs, bufs):
             cl.enqueue_copy(self.queue, host, buf)
         return outputs

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from invrender.scene.types import Camera, Maps, Mesh, Scene
+from invrender.scene.types import Maps, Mesh, Scene
+from invrender.synthesize.room import pinhole_camera
 
 
 def icosphere(radius=1.0, center=(0, 0, 0), subdivisions=3):
@@ -57,18 +58,11 @@ def merge(*parts):
                 np.concatenate(ids))
 
 
-def look_at_camera(eye, target, up=(0, 1, 0), width=48, height=36, fov_x_deg=50.0, name="cam", cx=None, cy=None):
-    """A PINHOLE camera at eye looking at target (OpenCV axes: x right, y down, z forward)."""
-    eye, target, up = (np.asarray(a, np.float64) for a in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)  # right = forward x up... for y down
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    f = 0.5 * width / np.tan(np.radians(fov_x_deg) / 2)
-    params = np.array([f, f, width / 2 if cx is None else cx, height / 2 if cy is None else cy])
-    return Camera(name, "PINHOLE", width, height, params, R, -R @ eye)
+def look_at_camera(eye, target, width=48, height=36, fov_x_deg=50.0, name="cam", cx=None, cy=None):
+    """A PINHOLE camera at eye looking at target, principal point (cx, cy) (default centred)."""
+    camera = pinhole_camera(name, eye, target, width, height, fov_x_deg)
+    camera.params[2:] = [width / 2 if cx is None else cx, height / 2 if cy is None else cy]
+    return camera
 
 
 def sphere_in_sky(kd=0.5, sky=1.0, subdivisions=3, atlas=(4, 4)):
@@ -118,7 +112,7 @@ def box_room(kd=(0.6, 0.5, 0.4), light=8.0, ks=0.0, ka=0.1, size=(32, 24), windo
     maps = Maps.uniform(size=(2, 2), kd=0.0, ks=0.0, ka=ka, kg=sky if window else 0.0, cube=4)
     maps.kd[0, 0], maps.ks[0, 0] = kd, ks
     maps.ke[0, 1] = light
-    maps.kw[1, 0] = 1.0
+    maps.kw[1, 0] = 1.0 if window else 0.0
     camera = look_at_camera((-1.2, 1.4, 1.2), (0.5, 0.8, -0.8), width=size[0], height=size[1], fov_x_deg=75)
     ids = np.repeat(np.arange(len(parts)) + 1, 2).astype(np.int32)
     return Scene(Mesh(positions, faces, uvs, ids), maps, [camera])

@@ -40,7 +40,9 @@ class Renderer:
         self.context, self.queue = context_and_queue(device)
         self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
         self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(w_env, w_emit))
-        self.program = build_program(self.context, "render.cl", features.defines())
+        program = build_program(self.context, "render.cl", features.defines())
+        self.render_kernel = cl.Kernel(program, "render_rays")
+        self.aov_kernel = cl.Kernel(program, "primary_aovs")
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
@@ -72,7 +74,7 @@ class Renderer:
         accum, accum_buf = self._zeros((n, 4))
         accum_sq, accum_sq_buf = self._zeros((n, 4))
         per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
-        kernel = self.program.render_rays
+        kernel = self.render_kernel
         starts = range(0, spp, per_launch)
         for start in tqdm(starts, desc="render", unit="launch", disable=not progress, leave=False):
             count = min(per_launch, spp - start)
@@ -91,7 +93,7 @@ class Renderer:
         cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
         out = {"depth": self._zeros(n), "normal": self._zeros((n, 4)), "uv": self._zeros((n, 2)),
                "instance_id": self._zeros(n, np.int32), "triangle_id": self._zeros(n, np.int32)}
-        self.program.primary_aovs(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
+        self.aov_kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
                                   np.int32(n), *(buf for _, buf in out.values()))
         for host, buf in out.values():
             cl.enqueue_copy(self.queue, host, buf)
