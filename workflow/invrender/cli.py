@@ -32,9 +32,11 @@ def _load_config(path: str | None) -> dict:
 
 
 def cmd_synthesize(args):
+    from .render.renderer import Renderer
     from .synthesize import synthesize
 
-    synthesize(args.kind, Path(args.out), _load_config(args.config), spp=args.spp, seed=args.seed, device=args.device)
+    synthesize(args.kind, Path(args.out), _load_config(args.config), spp=args.spp, seed=args.seed,
+               renderer_factory=lambda scene: Renderer(scene, device=args.device))
 
 
 def cmd_features(args):
@@ -69,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="capture directory to write")
     p.add_argument("--config", help="YAML with the scene's size, counts, resolutions")
     p.add_argument("--spp", type=int, default=256)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, help="overrides the config's seed (scene and noise)")
     p.add_argument("--device", help="OpenCL device name substring (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_synthesize)
 
