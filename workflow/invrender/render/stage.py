@@ -29,7 +29,9 @@ def write_features(scene_dir, out_path, settings: AnalysisSettings = AnalysisSet
 
 def render_views(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, device=None, progress=True):
     """Render the scene's cameras (or those named) to out_dir/<camera>.exr + .png preview, and the
-    AOVs to out_dir/aovs/<camera>_{depth,normal,uv}.exr and _{instance,triangle}.png/.npy."""
+    AOVs to out_dir/aovs/<camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical
+    axis (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1
+    (0 = miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
     from .renderer import Renderer
 
     scene = load_scene(scene_dir)
@@ -51,5 +53,7 @@ def render_views(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras
             write_exr(tmp / "aovs" / f"{stem}_depth.exr", out["depth"])
             write_exr(tmp / "aovs" / f"{stem}_normal.exr", out["normal"])
             write_exr(tmp / "aovs" / f"{stem}_uv.exr", np.dstack([out["uv"], np.zeros_like(out["depth"])]))
-            write_mask(tmp / "aovs" / f"{stem}_instance.png", out["instance_id"].astype("uint16"))
+            write_exr(tmp / "aovs" / f"{stem}_instance.exr", out["instance_id"].astype(np.uint32))
+            write_exr(tmp / "aovs" / f"{stem}_triangle.exr", (out["triangle_id"] + 1).astype(np.uint32))
+            write_mask(tmp / "aovs" / f"{stem}_instance.png", out["instance_id"].astype(np.uint16))
     return renderer.features

@@ -123,12 +123,15 @@ def read_mask(path) -> np.ndarray:
 
 
 def write_exr(path, array, half: bool = False) -> None:
-    """Write (H, W), (H, W, 1) or (H, W, 3) as EXR: channel Y, or R, G, B. Float32 unless half."""
+    """Write (H, W), (H, W, 1) or (H, W, 3) as EXR: channel Y, or R, G, B. Float32 unless half;
+    unsigned integer arrays (ids) are written exactly, as 32-bit UINT channels."""
     path = Path(path)
     a = np.asarray(array)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[:, :, 0]
-    dtype = np.float16 if half else np.float32
+    if np.issubdtype(a.dtype, np.integer) and a.min(initial=0) < 0:
+        raise ValueError(f"write_exr({path}): ids must be >= 0 (UINT channels)")
+    dtype = np.uint32 if np.issubdtype(a.dtype, np.integer) else (np.float16 if half else np.float32)
     if a.ndim == 2:
         channels = {"Y": np.ascontiguousarray(a, dtype=dtype)}
     elif a.ndim == 3 and a.shape[2] == 3:
