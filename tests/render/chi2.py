@@ -15,6 +15,7 @@ rejects outright.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -153,12 +154,15 @@ def pearson(observed, expected, min_expected: float = 5.0):
 
 
 def chi2_test(sample_fn, pdf_fn, n_samples: int = 1_000_000, res=(20, 40), tol: float | None = None,
-              significance: float = 0.01, test_count: int = 1, min_expected: float = 5.0):
+              significance: float = 0.01, test_count: int = 1, min_expected: float = 5.0,
+              sub: int | None = None):
     """Run the test: n_samples from sample_fn, expected counts n * (integral of pdf_fn over
     each cell, `integrate_cells` with absolute tolerance tol, default 0.5 / n: half a sample),
     plus a cell for failed samples with expected count n (1 - integral of pdf_fn) (left out
     when nothing failed and the PDF integrates to 1 within 1e-3). A valid
     sample where pdf_fn is 0 rejects outright (the sampler leaves the PDF's support).
+    sub: optional minimum number of integration intervals per cell side before the adaptive
+    refinement decides (rounded up to 8 * 2^d); the adaptive rule alone usually suffices.
     Returns a Chi2Result (truthy when the sampler is accepted at the Sidak-corrected level)."""
     dirs = np.asarray(sample_fn(n_samples), dtype=np.float64)
     if dirs.shape != (n_samples, 3):
@@ -166,7 +170,8 @@ def chi2_test(sample_fn, pdf_fn, n_samples: int = 1_000_000, res=(20, 40), tol: 
     counts, failed = histogram(dirs, res)
     valid = dirs[np.all(np.isfinite(dirs), axis=-1) & (np.linalg.norm(dirs, axis=-1) > 0)]
     outside = int(np.sum(np.asarray(pdf_fn(normalize_rows(valid))) <= 0))
-    prob = integrate_cells(pdf_fn, res, 0.5 / n_samples if tol is None else tol)
+    min_depth = 0 if sub is None else max(0, math.ceil(math.log2(sub / 8)))
+    prob = integrate_cells(pdf_fn, res, 0.5 / n_samples if tol is None else tol, min_depth=min_depth)
     integral = float(prob.sum())
     expected = prob * n_samples
     e_fail = max(0.0, 1.0 - integral) * n_samples
