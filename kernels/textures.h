@@ -16,7 +16,9 @@ inline int atlas_texel(const SceneData* s, float2 uv)
 inline Material material_at(const SceneData* s, int texel)
 {
     float4 a = s->material[3 * texel], b = s->material[3 * texel + 1], c = s->material[3 * texel + 2];
-    Material m = {a.xyz, b.xyz, c.xyz, a.w, b.w};
+    /* ka = 0 would make D a delta (0/0 at h = n): the model's range starts at KA_MIN, as in the
+     * reference (render/bsdf.py) */
+    Material m = {a.xyz, b.xyz, c.xyz, fmax(a.w, 1e-6f), b.w};
     return m;
 }
 
