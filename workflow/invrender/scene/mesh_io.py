@@ -249,6 +249,15 @@ def _obj_index(token: str, count: int, path, line_no: int, what: str) -> int:
     return i - 1 if i > 0 else count + i
 
 
+def _check_obj_indices(path, corners, count: int, starts, kind: str) -> None:
+    """Every face corner's `kind` (v or vt) index within the file's count of them."""
+    bad = (corners < 0) | (corners >= count)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        face = int(np.searchsorted(starts, k, side="right") - 1)
+        raise SceneError(path, f"face {face} {kind}", f"indices in [1, {count}] (the {kind} count), got {corners[k] + 1}")
+
+
 def read_obj(path, require_uvs: bool = True) -> Mesh:
     path = Path(path)
     positions, texcoords = [], []
@@ -298,13 +307,7 @@ def read_obj(path, require_uvs: bool = True) -> Mesh:
         (s, s + j, s + j + 1) for s, n in zip(starts.tolist(), polygon_sizes) for j in range(1, n - 1)
     ]
     tri = np.asarray(tri, np.int64).reshape(-1, 3)
-    bad = (corners_v < 0) | (corners_v >= len(positions))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        face = int(np.searchsorted(starts, k, side="right") - 1)
-        raise SceneError(
-            path, f"face {face} v", f"indices in [1, {len(positions)}] (the v count), got {corners_v[k] + 1}"
-        )
+    _check_obj_indices(path, corners_v, len(positions), starts, "v")
     has_uvs = len(texcoords) > 0 and not any_without_vt
     if not has_uvs:
         if require_uvs:
@@ -318,13 +321,7 @@ def read_obj(path, require_uvs: bool = True) -> Mesh:
             uvs=None,
         )
     texcoords = np.asarray(texcoords, np.float64).reshape(-1, 2)
-    bad = (corners_vt < 0) | (corners_vt >= len(texcoords))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        face = int(np.searchsorted(starts, k, side="right") - 1)
-        raise SceneError(
-            path, f"face {face} vt", f"indices in [1, {len(texcoords)}] (the vt count), got {corners_vt[k] + 1}"
-        )
+    _check_obj_indices(path, corners_vt, len(texcoords), starts, "vt")
     pairs, inverse = np.unique(np.stack([corners_v, corners_vt], axis=1), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     return Mesh(
