@@ -54,6 +54,12 @@ def cmd_render(args):
                  device=args.device)
 
 
+def cmd_cameras(args):
+    from .scene.cameras import convert_cameras
+
+    convert_cameras(args.source, args.out)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -91,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", action="append", help="render only this camera (repeatable)")
     p.add_argument("--device")
     p.set_defaults(func=cmd_render)
+
+    p = stages.add_parser("cameras", help="a capture's cameras (COLMAP or transforms.json) -> a COLMAP text model")
+    p.add_argument("source", help="COLMAP sparse model directory (text or binary) or transforms.json")
+    p.add_argument("--out", required=True, help="directory to write the COLMAP text model to")
+    p.set_defaults(func=cmd_cameras)
 
     p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
     p.add_argument("what", choices=["render"])

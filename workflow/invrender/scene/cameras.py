@@ -319,3 +319,18 @@ def read_transforms_json(path) -> list[Camera]:
         dup = next(n for n in names if names.count(n) > 1)
         raise SceneError(path, "frames file_path", f"unique image paths, {dup} appears twice")
     return out
+
+
+# ---------------------------------------------------------------------------- the cameras stage
+
+
+def convert_cameras(source, out_dir) -> list[Camera]:
+    """The `cameras` stage: a capture's cameras (COLMAP model directory, text or binary, or a
+    transforms.json), read by ``read_cameras`` and written to ``out_dir`` as a COLMAP text model
+    (atomically), so that every later stage reads one format. Returns the cameras."""
+    cameras = read_cameras(source)
+    if not cameras:
+        raise SceneError(Path(source), "(cameras)", "at least one posed camera")
+    write_colmap(out_dir, cameras)
+    log.info("%s: %d camera(s) -> %s", source, len(cameras), out_dir)
+    return cameras
