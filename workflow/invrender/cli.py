@@ -60,6 +60,14 @@ def cmd_cameras(args):
     convert_cameras(args.source, args.out)
 
 
+def cmd_geometry(args):
+    from .geometry.stage import run_geometry
+
+    run_geometry(args.source, args.out, target_faces=args.target_faces, texels_per_meter=args.texels_per_meter,
+                 atlas_resolution=args.atlas_resolution, padding=args.padding, poisson_depth=args.poisson_depth,
+                 threads=args.threads)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -102,6 +110,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("source", help="COLMAP sparse model directory (text or binary) or transforms.json")
     p.add_argument("--out", required=True, help="directory to write the COLMAP text model to")
     p.set_defaults(func=cmd_cameras)
+
+    p = stages.add_parser("geometry", help="clean/reconstruct, simplify, unwrap a mesh or point cloud -> mesh.ply, atlas.npz")
+    p.add_argument("source", help="PLY/OBJ triangle mesh, or PLY point cloud with normals (meters, +Y up)")
+    p.add_argument("--out", required=True, help="directory to write (mesh.ply, atlas.npz, geometry.json)")
+    p.add_argument("--target-faces", type=int, default=20000, help="quadric simplification target (MILO: 20K)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--texels-per-meter", type=float, help="fixed texel density; the atlas grows to fit")
+    size.add_argument("--atlas-resolution", type=int, default=1024, help="square atlas size in texels")
+    p.add_argument("--padding", type=int, default=2, help="empty texels between charts")
+    p.add_argument("--poisson-depth", type=int, default=8, help="screened Poisson octree depth (point clouds)")
+    p.add_argument("--threads", type=int, help="Poisson threads (default: the CPUs this process may use)")
+    p.set_defaults(func=cmd_geometry)
 
     p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
     p.add_argument("what", choices=["render"])
