@@ -134,19 +134,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    # Handlers go on the package's logger, not the root: a host (pytest, a notebook) keeps its
+    # own logging, and the rule's log file gets everything the stage says.
+    log = logging.getLogger("invrender")
+    log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
     handlers = [logging.StreamHandler(sys.stderr)]
     if args.log:
         Path(args.log).parent.mkdir(parents=True, exist_ok=True)
         handlers.append(logging.FileHandler(args.log))
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, handlers=handlers,
-                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    for handler in handlers:
+        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+        log.addHandler(handler)
     from .scene.types import SceneError
 
     try:
         args.func(args)
     except SceneError as error:
-        logging.getLogger("invrender").error("%s", error)
+        log.error("%s", error)
         return 2
+    finally:
+        for handler in handlers:
+            log.removeHandler(handler)
+            handler.close()
     return 0
 
 
