@@ -1,0 +1,30 @@
+"""invrender: captures of real spaces in, editable and relightable scenes out.
+
+One rule per stage (workflow/rules/<stage>.smk), each calling one `invrender <stage>` command;
+artifacts land in results/{scene}/ (DESIGN.md, "Artifacts"). The default config is the
+embedded demo: `snakemake --cores 2` builds two small synthetic scenes end to end.
+"""
+
+
+configfile: "config/config.yaml"
+
+
+report: "workflow/report/workflow.rst"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/synthesize.smk"
+include: "workflow/rules/cameras.smk"
+include: "workflow/rules/geometry.smk"
+include: "workflow/rules/features.smk"
+include: "workflow/rules/render.smk"
+
+
+localrules:
+    all,
+
+
+rule all:
+    default_target: True
+    input:
+        [target for scene in SCENES for target in scene_targets(scene)],

@@ -1,0 +1,31 @@
+rule features:
+    """Which effects the scene calls for (specular lobe, emission, environment, bounce count):
+    the kernels' build flags, with the evidence behind each choice."""
+    input:
+        scene_input,
+    output:
+        report(
+            "results/{scene}/features.json",
+            caption="../report/features.rst",
+            category="Features",
+            labels={"scene": "{scene}"},
+        ),
+    log:
+        "results/{scene}/logs/features.log",
+    benchmark:
+        "results/{scene}/benchmarks/features.tsv"
+    conda:
+        "../../envs/render.yaml"
+    threads: 2
+    resources:
+        mem_mb=2000,
+        runtime=10,
+        gpu=gpu_request,
+    params:
+        scene=scene_dir,
+        analysis=analysis_config,
+        overrides=feature_overrides,
+        device=device_env,
+    shell:
+        "printf '%s\\n' {params.analysis:q} | {params.device} invrender --log {log} features"
+        " {params.scene} --out {output} --config /dev/stdin {params.overrides}"
