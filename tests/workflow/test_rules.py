@@ -1,0 +1,157 @@
+"""Each rule run alone on toy inputs, its outputs checked for content.
+
+The synthetic captures are built once per module (that is the synthesize rule's test); every
+other test targets one rule's outputs, so that rule and nothing else runs. Beside the two
+synthetic scenes there is a user capture, `mine`: the room's capture copied the way a user
+would bring it (mesh.ply, images/, cameras as a transforms.json instead of COLMAP).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+from workflow_helpers import colmap_image_names, job_counts, read_image, read_json, snakemake
+
+VIEWS = {"room": 2, "cans": 1}
+WIDTH, HEIGHT = 32, 24
+GL_TO_CV = np.diag([1.0, -1.0, -1.0])
+
+
+def write_transforms_json(cameras, path):
+    """The nerfstudio convention: camera-to-world with OpenGL camera axes, intrinsics per frame."""
+    frames = []
+    for cam in cameras:
+        fx, fy, cx, cy = cam.params[:4]
+        c2w = np.eye(4)
+        c2w[:3, :3] = cam.R.T @ GL_TO_CV
+        c2w[:3, 3] = -cam.R.T @ cam.t
+        frames.append({"file_path": f"images/{cam.name}", "transform_matrix": c2w.tolist(),
+                       "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": cam.width, "h": cam.height})
+    path.write_text(json.dumps({"frames": frames}, indent=1))
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory, test_config):
+    """A working directory with both synthetic captures made (the synthesize rule alone) and
+    the user capture `mine`; returns (workdir, config file)."""
+    from invrender.scene.cameras import read_cameras
+
+    workdir = tmp_path_factory.mktemp("rules")
+    config = dict(test_config, scenes=dict(test_config["scenes"], mine={"capture": {"path": "captures/mine"}}))
+    result = snakemake(workdir, "--cores", "2", "results/room/capture", "results/cans/capture")
+    assert job_counts(result.stdout) == {"synthesize": 2}
+
+    capture = workdir / "captures" / "mine"
+    (capture / "images").mkdir(parents=True)
+    shutil.copy(workdir / "results/room/capture/mesh.ply", capture / "mesh.ply")
+    for png in (workdir / "results/room/capture/images").glob("*.png"):
+        shutil.copy(png, capture / "images" / png.name)
+    cameras = read_cameras(workdir / "results/room/capture/sparse")
+    for cam in cameras:  # transforms.json names the PNGs the user has
+        cam.name = cam.name.rsplit(".", 1)[0] + ".png"
+    write_transforms_json(cameras, capture / "transforms.json")
+    config_file = workdir / "config.yaml"
+    config_file.write_text(yaml.safe_dump(config))
+    return workdir, config_file
+
+
+def test_synthesize_writes_captures(built):
+    workdir, _ = built
+    for scene, views in VIEWS.items():
+        capture = workdir / "results" / scene / "capture"
+        exrs = sorted((capture / "images").glob("*.exr"))
+        assert len(exrs) == views
+        for exr in exrs:
+            image = read_image(exr)
+            assert image.shape == (HEIGHT, WIDTH, 3)
+            assert np.isfinite(image).all() and (image >= 0).all() and image.mean() > 0
+            assert exr.with_suffix(".png").is_file()
+            assert (capture / "masks" / f"{exr.stem}.png").is_file()
+        assert colmap_image_names(capture / "sparse") == [exr.name for exr in exrs]
+        assert (capture / "mesh.ply").stat().st_size > 0
+        assert read_json(capture / "ground_truth/scene/scene.json")
+        assert (workdir / "results" / scene / "logs/synthesize.log").stat().st_size > 0
+        assert (workdir / "results" / scene / "benchmarks/synthesize.tsv").is_file()
+    poses = read_json(workdir / "results/cans/capture/ground_truth/poses.json")
+    assert len(poses["instances"]) == 3
+
+
+def test_cameras_normalises_colmap_and_transforms_json(built):
+    from invrender.scene.cameras import read_cameras
+
+    workdir, config = built
+    result = snakemake(workdir, "--cores", "2", "results/room/cameras", "results/mine/cameras", config=config)
+    assert job_counts(result.stdout) == {"cameras": 2}
+    room = read_cameras(workdir / "results/room/cameras")
+    assert [c.name for c in room] == colmap_image_names(workdir / "results/room/capture/sparse")
+    assert (workdir / "results/room/cameras/cameras.txt").is_file()  # a text model
+    mine = read_cameras(workdir / "results/mine/cameras")
+    assert len(mine) == VIEWS["room"]
+    for a, b in zip(room, mine):  # the same cameras, whichever format they came in
+        assert (b.width, b.height) == (WIDTH, HEIGHT)
+        np.testing.assert_allclose(b.R, a.R, atol=1e-9)
+        np.testing.assert_allclose(b.t, a.t, atol=1e-9)
+        np.testing.assert_allclose(b.params[:4], a.params[:4])
+
+
+def test_geometry_simplifies_and_unwraps(built, test_config):
+    from plyfile import PlyData
+
+    workdir, config = built
+    result = snakemake(workdir, "--cores", "2", "results/room/geometry", "results/mine/geometry", config=config)
+    assert job_counts(result.stdout) == {"geometry": 2}
+    target = test_config["geometry"]["target_faces"]
+    resolution = test_config["geometry"]["atlas_resolution"]
+    for scene in ("room", "mine"):
+        geometry = workdir / "results" / scene / "geometry"
+        info = read_json(geometry / "geometry.json")
+        faces = info["mesh"]["faces"]
+        assert 0 < faces <= max(target, info["input"]["faces"]) * 1.05
+        assert len(PlyData.read(geometry / "mesh.ply")["face"]) == faces
+        with np.load(geometry / "atlas.npz") as atlas:
+            assert {"triangle", "barycentric", "position", "normal", "mask"} <= set(atlas.files)
+            assert atlas["mask"].shape == (resolution, resolution)
+            assert atlas["mask"].mean() > 0.2  # charts cover a good part of the atlas
+            assert atlas["triangle"][atlas["mask"]].max() < faces
+    # The user's copy of the room gives the room's geometry.
+    assert read_json(workdir / "results/mine/geometry/geometry.json")["mesh"]["faces"] == faces
+
+
+def test_features_analyses_the_scene(built, test_config):
+    workdir, _ = built
+    result = snakemake(workdir, "--cores", "2", "results/room/features.json")
+    assert job_counts(result.stdout) == {"features": 1}
+    document = read_json(workdir / "results/room/features.json")
+    assert set(document["features"]) == {"specular", "emission", "emitter_sampling", "environment", "window",
+                                         "env_sampling", "max_bounces"}
+    # The room has ceiling lights, a window and a glossy table.
+    assert document["features"]["emission"] and document["features"]["window"] and document["features"]["specular"]
+    settings = document["evidence"]["settings"]
+    assert settings["bounce_fraction"] == 0.01 and settings["max_bounces"] == 10
+
+
+def test_render_writes_every_view(built):
+    workdir, _ = built
+    snakemake(workdir, "--cores", "2", "results/room/features.json")  # upstream, if not built here yet
+    result = snakemake(workdir, "--cores", "2", "results/room/renders")
+    assert job_counts(result.stdout) == {"render": 1}
+    renders = workdir / "results/room/renders"
+    exrs = sorted(renders.glob("*.exr"))
+    assert [p.stem for p in exrs] == [p.stem for p in sorted((workdir / "results/room/capture/images").glob("*.exr"))]
+    for exr in exrs:
+        image = read_image(exr)
+        assert image.shape == (HEIGHT, WIDTH, 3) and np.isfinite(image).all() and image.mean() > 0
+        assert exr.with_suffix(".png").is_file()
+        for aov in ("depth", "normal", "uv", "instance", "triangle"):
+            assert (renders / "aovs" / f"{exr.stem}_{aov}.exr").is_file()
+
+
+def test_user_capture_has_no_scene_to_render(built):
+    workdir, config = built
+    result = snakemake(workdir, "-n", "results/mine/renders", config=config, check=False)
+    assert result.returncode != 0
+    assert "'mine' is a capture" in result.stdout

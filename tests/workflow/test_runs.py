@@ -1,0 +1,124 @@
+"""Whole runs of the toy config: what re-runs when the config changes, the report, and a run
+killed halfway then resumed."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
+
+RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry",
+                  "features.json": "features", "renders": "render"}
+OUTPUTS = tuple(RULE_OF_OUTPUT)
+
+
+@pytest.fixture(scope="module")
+def complete(tmp_path_factory):
+    """A working directory where the whole toy workflow has run."""
+    workdir = tmp_path_factory.mktemp("complete")
+    result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
+    assert job_counts(result.stdout) == {
+        "synthesize": 2, "cameras": 2, "geometry": 2, "features": 2, "render": 2, "all": 1,
+    }
+    return workdir
+
+
+def test_nothing_to_do_after_a_complete_run(complete):
+    result = snakemake(complete, "-n")
+    assert job_counts(result.stdout) == {}
+    assert "Nothing to be done" in result.stdout
+
+
+def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_path):
+    override = tmp_path / "faces.yaml"
+    override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
+    result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
+    # Nothing downstream of geometry reads it yet (features and render read the synthetic
+    # scene until the bake stage lands): geometry and the final target only.
+    assert job_counts(result.stdout) == {"geometry": 2, "all": 1}
+    assert "Params have changed since last execution" in result.stdout
+    # The same through --config, as one would type it.
+    result = snakemake(complete, "-n", "--config", "geometry={target_faces: 1000}")
+    assert job_counts(result.stdout) == {"geometry": 2, "all": 1}
+
+
+def test_changing_render_spp_reruns_render_only(complete, tmp_path):
+    override = tmp_path / "spp.yaml"
+    override.write_text(yaml.safe_dump({"render": {"spp": 8}}))
+    result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
+    assert job_counts(result.stdout) == {"render": 2, "all": 1}
+
+
+def test_report_shows_the_renders(complete):
+    report = complete / "report.html"
+    snakemake(complete, "--report", report)
+    html = report.read_text(errors="replace")
+    assert "Renders" in html and "Geometry" in html and "Features" in html
+    for view in ("view_000.png", "view_001.png", "features.json", "geometry.json"):
+        assert view in html
+
+
+def _mtimes(workdir: Path) -> dict[str, float]:
+    """Modification times of the stage outputs that exist, by path relative to workdir."""
+    return {
+        str(path.relative_to(workdir)): path.stat().st_mtime
+        for scene in ("room", "cans")
+        for name in OUTPUTS
+        if (path := workdir / "results" / scene / name).exists()
+    }
+
+
+def _leftovers(workdir: Path) -> list[str]:
+    temporary = [str(p.relative_to(workdir)) for p in (workdir / "results").rglob("*.tmp-*")]
+    incomplete = workdir / ".snakemake" / "incomplete"
+    markers = [p.name for p in incomplete.iterdir()] if incomplete.exists() else []
+    return temporary + markers
+
+
+def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
+    """Ctrl-C (SIGINT to the process group) while a downstream job runs, then run again."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(SNAKEFILE), "--directory", str(tmp_path),
+           "--configfile", str(TEST_CONFIG), "--workflow-profile", str(LOCAL_PROFILE)]
+    with open(tmp_path / "first.log", "w") as log:
+        process = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=snakemake_env(),
+                                   start_new_session=True)
+        try:
+            deadline = time.monotonic() + 300
+            # features runs after the capture it reads: wait until one starts (its log appears).
+            while not list(tmp_path.glob("results/*/logs/features.log")):
+                assert process.poll() is None, (tmp_path / "first.log").read_text()[-3000:]
+                assert time.monotonic() < deadline, "no features job started"
+                time.sleep(0.02)
+            os.killpg(process.pid, signal.SIGINT)
+            assert process.wait(timeout=120) != 0
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+    killed = [p.parent.parent.name for p in tmp_path.glob("results/*/logs/features.log")]
+    assert all((tmp_path / "results" / scene / "capture").is_dir() for scene in killed)
+    assert not list(tmp_path.glob("results/*/*.tmp-*"))  # the killed job left no partial output
+    before = _mtimes(tmp_path)
+    assert before, "nothing had finished before the kill"
+
+    result = snakemake(tmp_path, "--workflow-profile", LOCAL_PROFILE)
+    # Exactly the jobs whose outputs were missing run again, the killed one among them.
+    missing = [f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS
+               if f"results/{s}/{name}" not in before]
+    expected = {}
+    for path in missing:
+        rule = RULE_OF_OUTPUT[path.rsplit("/", 1)[1]]
+        expected[rule] = expected.get(rule, 0) + 1
+    assert "features" in expected
+    assert job_counts(result.stdout) == expected | {"all": 1}
+    after = _mtimes(tmp_path)
+    assert {path: after[path] for path in before} == before  # nothing finished was redone
+    assert set(after) == {f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS}
+    assert _leftovers(tmp_path) == []
+    assert job_counts(snakemake(tmp_path, "-n").stdout) == {}

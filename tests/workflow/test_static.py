@@ -1,0 +1,187 @@
+"""The workflow's frame, without running a job: lint, formatting, the demo's DAG, the config
+schema and its errors, the cluster profile, and the conda environments' pins."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import tomllib
+
+import pytest
+import yaml
+from workflow_helpers import REPO, TEST_CONFIG, job_counts, snakemake
+
+DEMO_CONFIG = REPO / "config" / "config.yaml"
+SCHEMA = REPO / "workflow" / "schemas" / "config.schema.yaml"
+SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
+RAY_TRACING_RULES = {"synthesize", "features", "render"}
+
+
+def test_lint_is_clean(tmp_path):
+    result = snakemake(tmp_path, "--lint")
+    assert "Congratulations, your workflow is in a good condition!" in result.stdout
+    assert "Lints for" not in result.stdout and "warning" not in result.stdout.lower(), result.stdout
+
+
+def test_snakefmt_check():
+    paths = [REPO / "Snakefile", REPO / "workflow" / "rules"]
+    result = subprocess.run([sys.executable, "-m", "snakefmt", "--check", *map(str, paths)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert result.returncode == 0, result.stdout
+
+
+def test_dry_run_of_the_demo(tmp_path):
+    result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
+    assert job_counts(result.stdout) == {
+        "synthesize": 2, "cameras": 2, "geometry": 2, "features": 2, "render": 2, "all": 1,
+    }
+
+
+def test_rulegraph_picture_is_current(tmp_path):
+    """docs/rulegraph.svg shows every rule (regenerate it as README.md says when rules change)."""
+    result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
+    rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
+    svg = (REPO / "docs" / "rulegraph.svg").read_text()
+    assert rules == {"all", "synthesize", "cameras", "geometry", "features", "render"}
+    for rule in rules:
+        assert f">{rule}</text>" in svg
+
+
+# ---------------------------------------------------------------------------- the config
+
+
+def _walk(schema, path="config"):
+    yield path, schema
+    for key, sub in schema.get("properties", {}).items():
+        yield from _walk(sub, f"{path}.{key}")
+    if isinstance(schema.get("additionalProperties"), dict):
+        yield from _walk(schema["additionalProperties"], f"{path}.<name>")
+
+
+def test_schema_documents_and_closes_every_key():
+    schema = yaml.safe_load(SCHEMA.read_text())
+    readme = (REPO / "config" / "README.md").read_text()
+    for path, node in _walk(schema):
+        assert node.get("description"), f"{path}: no description"
+        if "properties" in node:
+            assert node.get("additionalProperties") is False, f"{path}: a typo'd key would pass"
+        key = path.rsplit(".", 1)[-1]
+        if key not in ("config", "<name>"):
+            assert f"`{key}`" in readme, f"config/README.md does not document {path}"
+
+
+def test_demo_config_is_valid_and_complete():
+    """The demo config spells out every top-level setting, so it doubles as a reference."""
+    schema = yaml.safe_load(SCHEMA.read_text())
+    demo = yaml.safe_load(DEMO_CONFIG.read_text())
+    assert set(demo) == set(schema["properties"])
+    assert {s["synthetic"]["kind"] for s in demo["scenes"].values()} == {"room", "duplicates"}
+
+
+BAD_CONFIGS = {
+    "typo in a section": ({"geometry": {"target_face": 1000}}, ["target_face"]),
+    "typo at the top": ({"render": {"spp": 4}, "scene": {}}, ["'scene' was unexpected"]),
+    "typo in a scene": ({"scenes": {"room": {"synthetic": {"kind": "room", "sed": 3}}}}, ["sed"]),
+    "typo in a generator override": (
+        {"scenes": {"room": {"synthetic": {"kind": "room", "config": {"camras": {}}}}}},
+        ["scenes.room.synthetic.config", "camras"],
+    ),
+    "wrong type": ({"render": {"spp": "many"}}, ["spp", "'many' is not of type 'integer'"]),
+    "unknown kind": ({"scenes": {"room": {"synthetic": {"kind": "castle"}}}}, ["castle"]),
+    "missing capture": (
+        {"scenes": {"kitchen": {"capture": {"path": "no/such/capture"}}}},
+        ["'kitchen'", "scenes.kitchen.capture.path", "no/such/capture"],
+    ),
+}
+
+
+@pytest.mark.parametrize("name", BAD_CONFIGS)
+def test_bad_config_stops_before_any_job(tmp_path, name):
+    override, expected = BAD_CONFIGS[name]
+    config = tmp_path / "override.yaml"
+    config.write_text(yaml.safe_dump(override))
+    result = snakemake(tmp_path, "--cores", "1", config=[TEST_CONFIG, config], check=False)
+    assert result.returncode != 0
+    for text in expected:
+        assert text in result.stdout, result.stdout[-3000:]
+    assert not (tmp_path / "results").exists()  # no job ran
+
+
+def test_capture_without_cameras_is_named(tmp_path):
+    capture = tmp_path / "mine"
+    capture.mkdir()
+    (capture / "mesh.ply").write_text("ply\n")
+    config = tmp_path / "override.yaml"
+    config.write_text(yaml.safe_dump({"scenes": {"mine": {"capture": {"path": "mine"}}}}))
+    result = snakemake(tmp_path, "-n", config=config, check=False)
+    assert result.returncode != 0
+    assert "scenes.mine.capture.path" in result.stdout and "transforms.json" in result.stdout
+
+
+def test_nested_config_overrides_on_the_command_line(tmp_path):
+    """--config hands nested values over as strings; numbers are read back as numbers."""
+    result = snakemake(tmp_path, "-n", "--config", "geometry={target_faces: 1000}", "render={spp: 2}")
+    assert job_counts(result.stdout)["geometry"] == 2
+    assert "--target-faces 1000" in snakemake(tmp_path, "-n", "-p", "--config", "geometry={target_faces: 1000}").stdout
+
+
+# ---------------------------------------------------------------------------- the cluster profile
+
+
+def _resources_by_rule(output: str) -> dict[str, str]:
+    rules = {}
+    for rule, resources in re.findall(r"(?m)^rule (\w+):\n(?:    .*\n)*?    resources: (.*)", output):
+        rules[rule] = resources
+    return rules
+
+
+@pytest.mark.parametrize("device, gpus", [("NVIDIA", 1), ("pocl", 0), (None, 0)])
+def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
+    pytest.importorskip("snakemake_executor_plugin_slurm")
+    args = ["-n", "--workflow-profile", SLURM_PROFILE]
+    if device:
+        args += ["--config", f"device={device}"]
+    result = snakemake(tmp_path, *args)
+    resources = _resources_by_rule(result.stdout)
+    resources.pop("all", None)
+    assert set(resources) == {"synthesize", "cameras", "geometry", "features", "render"}
+    for rule, line in resources.items():
+        assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line
+        if rule in RAY_TRACING_RULES:
+            assert f"gpu={gpus}" in line, (rule, line)
+        else:
+            assert "gpu=" not in line, (rule, line)
+
+
+# ---------------------------------------------------------------------------- conda environments
+
+
+def _requirement(spec: str) -> tuple[str, str]:
+    """("name", "the version part") of a PEP 508 requirement such as "numpy>=1.26"."""
+    match = re.match(r"^([A-Za-z0-9][A-Za-z0-9._-]*)\s*(.*)$", spec.strip())
+    return match.group(1).lower().replace("_", "-"), match.group(2).replace(" ", "")
+
+
+def test_conda_envs_pin_like_pyproject():
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    pins = dict(_requirement(s) for s in project["dependencies"])
+    for extra in project.get("optional-dependencies", {}).values():
+        pins.update(_requirement(s) for s in extra)
+    envs = sorted((REPO / "envs").glob("*.yaml"))
+    assert {e.stem for e in envs} >= {"render", "geometry", "workflow"}
+    for env in envs:
+        dependencies = yaml.safe_load(env.read_text())["dependencies"]
+        pip = next(d["pip"] for d in dependencies if isinstance(d, dict) and "pip" in d)
+        assert "-e ${INVRENDER_SOURCE}" in pip, f"{env.name}: does not install the package"
+        listed = [_requirement(s) for s in pip if not s.startswith("-")]
+        assert ("torch", "==2.13.0") in listed, f"{env.name}: torch must be pinned (an unpinned torch pulls CUDA)"
+        for name, version in listed:
+            assert name in pins, f"{env.name}: {name} is not a dependency in pyproject.toml"
+            assert version == pins[name], f"{env.name}: {name}{version!r} differs from pyproject's {name}{pins[name]}"
+
+
+def test_every_rule_uses_a_conda_env_that_exists():
+    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+        for env in re.findall(r'conda:\s*\n\s*"([^"]+)"', smk.read_text()):
+            assert (smk.parent / env).resolve().is_file(), f"{smk.name}: {env}"

@@ -1,0 +1,73 @@
+"""Helpers of the workflow tests: they run `snakemake` as a subprocess on the repository's
+Snakefile, in a temporary working directory, with the toy config beside this file."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+SNAKEFILE = REPO / "Snakefile"
+TEST_CONFIG = Path(__file__).with_name("config.yaml")
+LOCAL_PROFILE = REPO / "workflow" / "profiles" / "local"
+BIN = Path(sys.executable).parent
+
+
+def snakemake_env() -> dict:
+    """The environment of the runs: this interpreter's bin first (its `invrender`), and the
+    kernel binary cache of the session (INVRENDER_CACHE, else ~/.cache/invrender) kept."""
+    env = dict(os.environ)
+    env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
+    return env
+
+
+def snakemake(workdir, *args, config=TEST_CONFIG, check=True, timeout=600, **popen):
+    """Run snakemake on the repository's Snakefile in ``workdir``; returns the CompletedProcess
+    (stdout and stderr together in .stdout). ``config=None`` uses only the Snakefile's
+    configfile (the default demo config, which must then exist in ``workdir``)."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(SNAKEFILE), "--directory", str(workdir)]
+    if config is not None:
+        cmd += ["--configfile", *map(str, [config] if isinstance(config, (str, Path)) else config)]
+    cmd += [str(a) for a in args]
+    result = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=snakemake_env(), timeout=timeout, **popen)
+    if check and result.returncode != 0:
+        raise AssertionError(f"snakemake {' '.join(cmd[6:])} failed ({result.returncode}):\n{result.stdout[-6000:]}")
+    return result
+
+
+def job_counts(output: str) -> dict[str, int]:
+    """The 'Job stats' table of a snakemake run or dry run, as {rule: count} (without total);
+    {} when nothing is to be done."""
+    match = re.search(r"Job stats:\n.*?\n-+\s+-+\n(.*?)\ntotal\s+\d+", output, re.S)
+    if not match:
+        return {}
+    counts = {}
+    for line in match.group(1).splitlines():
+        rule, count = line.split()
+        counts[rule] = int(count)
+    return counts
+
+
+def read_image(path) -> np.ndarray:
+    """(H, W, C) linear float32: EXR as stored, PNG decoded from sRGB."""
+    from invrender.scene.images import read_image as read
+
+    return read(path)
+
+
+def read_json(path):
+    return json.loads(Path(path).read_text())
+
+
+def colmap_image_names(model_dir) -> list[str]:
+    import pycolmap
+
+    reconstruction = pycolmap.Reconstruction(str(model_dir))
+    return sorted(image.name for image in reconstruction.images.values())
