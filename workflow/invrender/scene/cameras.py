@@ -334,3 +334,27 @@ def convert_cameras(source, out_dir) -> list[Camera]:
     write_colmap(out_dir, cameras)
     log.info("%s: %d camera(s) -> %s", source, len(cameras), out_dir)
     return cameras
+
+
+# Forward (z) and down (y) axes of the six cube-face cameras, in the order +X, -X, +Y, -Y, +Z, -Z.
+CUBE_FACE_AXES = (
+    ((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)),
+    ((0, 1, 0), (0, 0, 1)), ((0, -1, 0), (0, 0, -1)),
+    ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)),
+)
+CUBE_FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
+
+
+def cube_face_cameras(center, size: int, name: str = "pano") -> list[Camera]:
+    """A panorama as six 90-degree PINHOLE cameras at `center` (how MILO takes panoramas in):
+    each face's frustum covers exactly its cube face, so the six images cover every direction
+    once. Rotations are proper (det +1), as COLMAP requires, which makes each face image the
+    mirror of an OpenGL cube-map face: cube maps are left-handed."""
+    center = np.asarray(center, np.float64)
+    cameras = []
+    for face, (forward, down) in zip(CUBE_FACE_NAMES, CUBE_FACE_AXES):
+        z, y = np.asarray(forward, np.float64), np.asarray(down, np.float64)
+        R = np.stack([np.cross(y, z), y, z])  # rows: camera x (right), y (down), z (forward)
+        params = np.array([size / 2, size / 2, size / 2, size / 2], np.float64)
+        cameras.append(Camera(f"{name}_{face}.exr", "PINHOLE", size, size, params, R, -R @ center))
+    return cameras
