@@ -3,7 +3,8 @@
 The synthetic captures are built once per module (that is the synthesize rule's test); every
 other test targets one rule's outputs, so that rule and nothing else runs. Beside the two
 synthetic scenes there is a user capture, `mine`: the room's capture copied the way a user
-would bring it (mesh.ply, images/, cameras as a transforms.json instead of COLMAP).
+would bring it (mesh.ply, images/, cameras as a transforms.json instead of COLMAP), and
+`binary`, the same with the cameras as a binary COLMAP model in COLMAP's own sparse/0/.
 """
 
 from __future__ import annotations
@@ -41,7 +42,10 @@ def built(tmp_path_factory, test_config):
     from invrender.scene.cameras import read_cameras
 
     workdir = tmp_path_factory.mktemp("rules")
-    config = dict(test_config, scenes=dict(test_config["scenes"], mine={"capture": {"path": "captures/mine"}}))
+    import pycolmap
+
+    users = {name: {"capture": {"path": f"captures/{name}"}} for name in ("mine", "binary")}
+    config = dict(test_config, scenes=dict(test_config["scenes"], **users))
     result = snakemake(workdir, "--cores", "2", "results/room/capture", "results/cans/capture")
     assert job_counts(result.stdout) == {"synthesize": 2}
 
@@ -54,6 +58,11 @@ def built(tmp_path_factory, test_config):
     for cam in cameras:  # transforms.json names the PNGs the user has
         cam.name = cam.name.rsplit(".", 1)[0] + ".png"
     write_transforms_json(cameras, capture / "transforms.json")
+    binary = workdir / "captures" / "binary"
+    (binary / "sparse" / "0").mkdir(parents=True)
+    shutil.copytree(workdir / "results/room/capture/images", binary / "images")  # the EXRs it names
+    shutil.copy(capture / "mesh.ply", binary / "mesh.ply")
+    pycolmap.Reconstruction(str(workdir / "results/room/capture/sparse")).write_binary(str(binary / "sparse" / "0"))
     config_file = workdir / "config.yaml"
     config_file.write_text(yaml.safe_dump(config))
     return workdir, config_file
@@ -84,18 +93,22 @@ def test_cameras_normalises_colmap_and_transforms_json(built):
     from invrender.scene.cameras import read_cameras
 
     workdir, config = built
-    result = snakemake(workdir, "--cores", "2", "results/room/cameras", "results/mine/cameras", config=config)
-    assert job_counts(result.stdout) == {"cameras": 2}
+    targets = [f"results/{scene}/cameras" for scene in ("room", "mine", "binary")]
+    result = snakemake(workdir, "--cores", "2", *targets, config=config)
+    assert job_counts(result.stdout) == {"cameras": 3}
     room = read_cameras(workdir / "results/room/cameras")
     assert [c.name for c in room] == colmap_image_names(workdir / "results/room/capture/sparse")
     assert (workdir / "results/room/cameras/cameras.txt").is_file()  # a text model
-    mine = read_cameras(workdir / "results/mine/cameras")
-    assert len(mine) == VIEWS["room"]
-    for a, b in zip(room, mine):  # the same cameras, whichever format they came in
-        assert (b.width, b.height) == (WIDTH, HEIGHT)
-        np.testing.assert_allclose(b.R, a.R, atol=1e-9)
-        np.testing.assert_allclose(b.t, a.t, atol=1e-9)
-        np.testing.assert_allclose(b.params[:4], a.params[:4])
+    assert (workdir / "captures/binary/sparse/0/cameras.bin").is_file()
+    for scene in ("mine", "binary"):
+        theirs = read_cameras(workdir / "results" / scene / "cameras")
+        assert (workdir / "results" / scene / "cameras/images.txt").is_file()
+        assert len(theirs) == VIEWS["room"]
+        for a, b in zip(room, theirs):  # the same cameras, whichever format they came in
+            assert (b.width, b.height) == (WIDTH, HEIGHT)
+            np.testing.assert_allclose(b.R, a.R, atol=1e-9)
+            np.testing.assert_allclose(b.t, a.t, atol=1e-9)
+            np.testing.assert_allclose(b.params[:4], a.params[:4])
 
 
 def test_geometry_simplifies_and_unwraps(built, test_config):
