@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
+import threading
 from pathlib import Path
 
 
@@ -132,8 +134,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _exit_on_sigterm(signum, frame):
+    # SIGTERM (scancel, a cluster's time limit, snakemake stopping its jobs) would end Python
+    # without unwinding; as SystemExit it unwinds like Ctrl-C, so atomic outputs remove their
+    # temporary files and nothing half-written is left beside the output.
+    raise SystemExit(128 + signum)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _exit_on_sigterm)
     # Handlers go on the package's logger, not the root: a host (pytest, a notebook) keeps its
     # own logging, and the rule's log file gets everything the stage says.
     log = logging.getLogger("invrender")

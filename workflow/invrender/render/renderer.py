@@ -80,6 +80,9 @@ class Renderer:
             count = min(per_launch, spp - start)
             kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
                    np.int32(n), np.uint64(seed), np.uint32(start), np.uint32(count), accum_buf, accum_sq_buf)
+            # One launch at a time: the progress bar tells the truth, and a signal (Ctrl-C,
+            # SIGTERM) is handled within a launch instead of after the whole queue drains.
+            self.queue.finish()
         cl.enqueue_copy(self.queue, accum, accum_buf)
         cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
         dropped = int(accum[:, 3].sum())
