@@ -1,0 +1,986 @@
+"""`invrender bench render`: the forward renderer against Mitsuba 3, in the same run.
+
+Four measurements on the synthetic room (``synthesize.room``, its view 2: glossy table, window
+with sky and sun, floor, walls), each printed as a table and written under ``--out``
+(``render.json`` with everything, one CSV per table, ``render_rmse_vs_time.png`` if matplotlib
+is installed). docs/benchmarks.md ("Renderer") has the method, a full run and its reading.
+
+1. **Time to equal RMSE** against Mitsuba's ``path`` integrator (``llvm_ad_rgb``; ``scalar_rgb``
+   at a reduced size if LLVM is unusable, said in the output) for 3 and 10 bounces.
+   Reference: the inverse-variance weighted mean of both renderers' converged images, each
+   rendered as two independent halves. Why both: it costs each renderer the same, halves the
+   reference noise against one renderer alone, and the bias check needs both converged images
+   anyway; as long as the two agree (checked and printed: relative difference of the image
+   means, and the per-pixel difference beyond noise) it favours neither. The reference's own
+   noise (estimated from the half-image differences) is subtracted from every MSE.
+   Each renderer then renders a ladder of spp, interleaved (A B, B A, ...) so both see the same
+   machine load, `repeats` times each with new seeds, the (spp, repeat) jobs in shuffled order;
+   time = median wall clock of one render call. The time at the target RMSE (the lower RMSE
+   both ladders reach) is interpolated log-log between rungs; beside it, the same from a fit
+   RMSE = k / sqrt(spp), t = a + b spp (c / sqrt(t) with a fixed per-call cost), and from
+   process CPU time instead of wall clock (less sensitive to other processes on the machine).
+   Excluded from the per-render times and reported separately as one-time costs: invrender's
+   scene packing (BVH build, emitter BVH, sampling tables), buffer upload and kernel build, and
+   its first launch; Mitsuba's scene conversion (our bridge), ``load_dict`` (its BVH build) and
+   its first render (JIT compilation of the kernel, or drjit's kernel cache lookup).
+2. **BVH build** of the room subdivided to ~200 k and ~1 M triangles, in a subprocess per size:
+   build time, peak traced allocation (tracemalloc) and peak RSS growth during the build, bytes
+   per triangle of the device buffers, and one-bounce render throughput of both renderers.
+3. **Specialised kernels** against the all-features kernel on an all-diffuse room without
+   window or sky and on the default room: time per sample, ratio, image agreement.
+4. **Profile**: where invrender's time and variance go (sampling strategies compiled out,
+   mixture weights, one-bounce ray throughput against Mitsuba).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import math
+import os
+import platform
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+log = logging.getLogger("invrender.bench")
+
+ROOM_VIEW = 2  # the room view that shows the glossy table, the window, floor and walls
+LAUNCH_SAMPLES = 2_000_000  # path samples per launch / Mitsuba pass (as render/renderer.py)
+VARIANT_ENV = "INVRENDER_BENCH_MITSUBA_VARIANT"  # force a Mitsuba variant (e.g. scalar_rgb)
+PROBE_MARK = "BVHPROBE "
+MIN_SPP_TO_JUDGE = 1000  # fewer samples per pixel: no verdict on whether two images agree
+
+
+@dataclass(frozen=True)
+class Settings:
+    mode: str
+    width: int | None = None  # None: the room's default camera (96 x 72)
+    height: int | None = None
+    view: int = ROOM_VIEW
+    bounces: tuple = (3, 10)
+    ladder: tuple = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+    repeats: int = 5
+    ref_spp_invrender: int = 8192  # per renderer, rendered as two halves
+    ref_spp_mitsuba: int = 8192
+    bvh_triangles: tuple = (200_000, 1_000_000)
+    bvh_repeats: int = 3
+    bvh_mitsuba: bool = True
+    throughput_spp: int = 16
+    throughput_repeats: int = 3
+    feature_spp: int = 64
+    feature_repeats: int = 5
+    profile_spp: int = 64
+    profile_repeats: int = 5
+
+
+FULL = Settings("full", repeats=7, throughput_spp=64, feature_spp=128, feature_repeats=8)
+QUICK = Settings("quick", width=32, height=24, ladder=(1, 2, 4, 8), repeats=3, ref_spp_invrender=256,
+                 ref_spp_mitsuba=256, bvh_triangles=(20_000,), bvh_repeats=1, throughput_spp=2,
+                 throughput_repeats=2, feature_spp=8, feature_repeats=2, profile_spp=8, profile_repeats=2)
+
+
+def scalar_settings(settings: Settings) -> Settings:
+    """Mitsuba's scalar_rgb calls the Python BSDF plugin per sample (~70x slower than llvm):
+    a smaller image, a shorter ladder and a smaller Mitsuba reference."""
+    quick = settings.mode == "quick"
+    return replace(settings, width=16 if quick else 32, height=12 if quick else 24,
+                   ladder=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
+                   ref_spp_mitsuba=32 if quick else 512, bvh_mitsuba=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# Small helpers
+# ---------------------------------------------------------------------------------------------
+
+
+def _clock(fn, *args, **kwargs):
+    """(result, wall seconds, CPU seconds of this process: all its threads)."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def _median(values) -> float:
+    return float(np.median(np.asarray(values, np.float64)))
+
+
+def _quiet_pyopencl():
+    # Renderer.render looks its kernel up per call; pyopencl warns each time (a cost we measure).
+    warnings.filterwarnings("ignore", message=".*has been retrieved more than once.*")
+
+
+def room_scene(settings: Settings, config: dict | None = None):
+    from ..synthesize.room import make_room
+
+    config = dict(config or {})
+    if settings.width:
+        config["cameras"] = {"width": int(settings.width), "height": int(settings.height)}
+    scene, metadata = make_room(config)
+    return scene, metadata
+
+
+def diffuse_variant(scene):
+    """The room with ks = 0, kw = 0 and kg = 0: Lambertian, no window, no sky (the window quad
+    becomes a black patch of wall)."""
+    from ..scene.types import Maps, Scene
+
+    m = scene.maps
+    maps = Maps(kd=m.kd, ks=np.zeros_like(m.ks), ka=m.ka, ke=m.ke, kw=np.zeros_like(m.kw), kg=np.zeros_like(m.kg))
+    return Scene(scene.mesh, maps, scene.cameras)
+
+
+def subdivide_mesh(mesh, n: int):
+    """Split every triangle into n^2 (each edge into n segments), UVs and instance ids carried.
+
+    Watertight: a point on an edge is summed from the three corners in global vertex order with
+    weights k / n, the third weight exactly 0, so the two faces sharing the edge compute the
+    same float64 value, hence the same float32 vertex.
+    """
+    from ..scene.types import Mesh
+
+    if n <= 1:
+        return mesh
+    faces = np.asarray(mesh.faces, np.int64)
+    ii, jj = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    keep = ii + jj <= n
+    i, j = ii[keep], jj[keep]
+    index = -np.ones((n + 1, n + 1), np.int64)
+    index[i, j] = np.arange(len(i))
+    weights = np.stack([n - i - j, i, j], -1) / n  # (P, 3) against corners in face order
+
+    perm = np.argsort(faces, axis=1, kind="stable")  # corners in global vertex order
+    w_sorted = np.take_along_axis(weights[None, :, :].repeat(len(faces), 0), perm[:, None, :].repeat(len(i), 1), 2)
+
+    def interpolate(values):
+        corners = np.asarray(values, np.float64)[np.take_along_axis(faces, perm, 1)]  # (F, 3, C)
+        out = w_sorted[..., 0:1] * corners[:, None, 0]
+        out = out + w_sorted[..., 1:2] * corners[:, None, 1]
+        out = out + w_sorted[..., 2:3] * corners[:, None, 2]
+        return out.reshape(-1, corners.shape[-1])
+
+    positions = interpolate(mesh.positions).astype(np.float32)
+    uvs = interpolate(mesh.uvs).astype(np.float32)
+    local = []
+    for a in range(n):
+        for b in range(n - a):
+            local.append((index[a, b], index[a + 1, b], index[a, b + 1]))
+            if a + b < n - 1:
+                local.append((index[a + 1, b], index[a + 1, b + 1], index[a, b + 1]))
+    local = np.asarray(local, np.int64)  # (n^2, 3), same winding as the face
+    new_faces = (np.arange(len(faces))[:, None, None] * len(i) + local[None]).reshape(-1, 3).astype(np.int32)
+    instances = None if mesh.instance_ids is None else np.repeat(np.asarray(mesh.instance_ids, np.int32), n * n)
+    return Mesh(positions=positions, faces=new_faces, uvs=uvs, instance_ids=instances)
+
+
+def subdivisions_for(base_triangles: int, target: int) -> int:
+    return max(1, int(round(math.sqrt(target / base_triangles))))
+
+
+class PeakRSS:
+    """Peak resident set size above the level at entry, polled every 2 ms by a thread
+    (psutil), with getrusage's ru_maxrss growth as a floor when psutil is missing."""
+
+    def __enter__(self):
+        import resource
+
+        self._resource = resource
+        try:
+            import psutil
+
+            self._process = psutil.Process()
+        except ImportError:
+            self._process = None
+        self.start = self._rss()
+        self.peak = self.start
+        self._maxrss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        self._stop = threading.Event()
+        if self._process is not None:
+            self._thread = threading.Thread(target=self._poll, daemon=True)
+            self._thread.start()
+        return self
+
+    def _rss(self) -> int:
+        if self._process is not None:
+            return int(self._process.memory_info().rss)
+        return self._resource.getrusage(self._resource.RUSAGE_SELF).ru_maxrss * 1024
+
+    def _poll(self):
+        while not self._stop.wait(0.002):
+            self.peak = max(self.peak, self._rss())
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        if self._process is not None:
+            self._thread.join()
+        self.peak = max(self.peak, self._rss())
+        maxrss = self._resource.getrusage(self._resource.RUSAGE_SELF).ru_maxrss * 1024
+        self.growth = max(self.peak - self.start, maxrss - self._maxrss0)
+        return False
+
+
+def _kernel_cached(features, device=None) -> str:
+    """Whether the render kernel for these features is in the binary cache already ("hit",
+    "miss"; "unknown" if render/program.py's private key function changed)."""
+    try:
+        from ..render.device import context_and_queue
+        from ..render.program import _cache_key, assemble_source, cache_dir
+
+        context, _ = context_and_queue(device)
+        key = _cache_key(assemble_source("render.cl"), tuple(features.defines()), context.devices[0])
+        return "hit" if (cache_dir() / f"{key}.bin").exists() else "miss"
+    except Exception:  # noqa: BLE001 - informational only
+        return "unknown"
+
+
+# ---------------------------------------------------------------------------------------------
+# The two renderers behind one interface: render(spp) -> (H, W, 3), fresh seeds on every call
+# ---------------------------------------------------------------------------------------------
+
+
+_seed_blocks = iter(range(1, 2**31, 100_003))
+
+
+def _next_seed_block() -> int:
+    """Every runner draws its seeds from its own block, so no two renders share random numbers."""
+    return next(_seed_blocks)
+
+
+class InvrenderRunner:
+    name = "invrender"
+
+    def __init__(self, scene, camera, features, device=None, host=None, w_env=0.25, w_emit=0.25):
+        from ..render.renderer import Renderer
+        from ..render.scene_buffers import HostScene
+
+        _quiet_pyopencl()
+        self.camera, self.features, self.one_time = camera, features, {}
+        if host is None:
+            host, self.one_time["pack_s"], _ = _clock(HostScene.pack, scene.mesh, scene.maps)
+        self.one_time["kernel_cache"] = _kernel_cached(features, device)
+        self.renderer, self.one_time["init_s"], _ = _clock(Renderer, scene, features, device, w_env, w_emit, host)
+        self._seed = _next_seed_block()
+
+    def render_full(self, spp: int) -> dict:
+        self._seed += 1
+        return self.renderer.render(self.camera, int(spp), self._seed, aovs=False)
+
+    def render(self, spp: int) -> np.ndarray:
+        return self.render_full(spp)["radiance"]
+
+    def warm_up(self):
+        _, self.one_time["first_render_s"], _ = _clock(self.render, 1)
+
+
+class MitsubaRunner:
+    name = "mitsuba"
+
+    def __init__(self, scene, camera, bounces, variant):
+        import mitsuba as mi
+
+        from ..render import mitsuba_bridge as bridge
+
+        self.mi, self.camera, self.one_time = mi, camera, {}
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scene_dict, self.one_time["convert_s"], _ = _clock(bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant)
+        self.bridge_warnings = sorted({str(w.message) for w in caught})
+        self.scene, self.one_time["load_s"], _ = _clock(mi.load_dict, scene_dict, parallel=False)
+        self.per_pass = max(1, LAUNCH_SAMPLES // (camera.width * camera.height))
+        self._seed = _next_seed_block()
+
+    def render(self, spp: int) -> np.ndarray:
+        """Passes of at most LAUNCH_SAMPLES path samples (as invrender's launches), averaged."""
+        total, done = None, 0
+        while done < spp:
+            count = min(self.per_pass, spp - done)
+            self._seed += 1
+            image = np.array(self.mi.render(self.scene, spp=count, seed=self._seed % 2**32), dtype=np.float64)[..., :3]
+            total = image * count if total is None else total + image * count
+            done += count
+        return (total / spp).astype(np.float32)
+
+    def warm_up(self):
+        _, self.one_time["first_render_s"], _ = _clock(self.render, 1)
+
+
+def choose_variant() -> tuple[str, str | None]:
+    """The Mitsuba variant to compare against and, if it is not llvm_ad_rgb, why."""
+    from ..render import mitsuba_bridge as bridge
+    import mitsuba as mi
+
+    forced = os.environ.get(VARIANT_ENV)
+    if forced:
+        note = None if forced == "llvm_ad_rgb" else f"Mitsuba variant forced to {forced} by ${VARIANT_ENV}"
+        return forced, note
+    if bridge.DEFAULT_VARIANT == "llvm_ad_rgb" and "llvm_ad_rgb" in mi.variants():
+        return "llvm_ad_rgb", None
+    return "scalar_rgb", (
+        "Mitsuba's llvm_ad_rgb variant is unavailable (no libLLVM >= 16 found; Debian: apt-get install "
+        "libllvm19, or set DRJIT_LIBLLVM_PATH). Comparing against scalar_rgb instead, a much weaker peer "
+        "(one lane, the Python milo BSDF called per sample), at a reduced image size and ladder.")
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. Time to equal RMSE
+# ---------------------------------------------------------------------------------------------
+
+
+def time_at_rmse(times, rmses, target) -> tuple[float, bool]:
+    """Time at which a (time, RMSE) ladder reaches `target`: log-log interpolation between the
+    bracketing rungs; c / sqrt(t) extrapolation from the nearest end (flag True) outside."""
+    t = np.maximum.accumulate(np.asarray(times, np.float64))
+    r = np.minimum.accumulate(np.asarray(rmses, np.float64))
+    if target < r[-1]:
+        return float(t[-1] * (r[-1] / target) ** 2), True
+    if target >= r[0]:
+        return float(t[0] * (r[0] / target) ** 2), target > r[0]
+    k = int(np.nonzero(r <= target)[0][0])  # first rung at or below the target; k >= 1
+    r0, r1, t0, t1 = r[k - 1], r[k], t[k - 1], t[k]
+    if r0 == r1:
+        return float(t1), False
+    s = (math.log(r0) - math.log(target)) / (math.log(r0) - math.log(r1))
+    return float(math.exp(math.log(t0) + s * (math.log(t1) - math.log(t0)))), False
+
+
+def fit_model(spps, times, rmses) -> dict:
+    """RMSE = k / sqrt(spp) and t = a + b spp, i.e. RMSE = k sqrt(b) / sqrt(t - a): the
+    c / sqrt(t) law with a fixed per-call cost a. k = median of rmse sqrt(spp) over the upper
+    half of the ladder; (a, b) by Theil-Sen (median of pairwise slopes), so one rung timed
+    during a burst of load from other processes does not move the fit."""
+    spps, times, rmses = (np.asarray(v, np.float64) for v in (spps, times, rmses))
+    half = len(spps) // 2
+    k = _median(rmses[half:] * np.sqrt(spps[half:]))
+    pairs = [(times[j] - times[i]) / (spps[j] - spps[i]) for i in range(len(spps)) for j in range(i + 1, len(spps))]
+    b = max(_median(pairs), 1e-30)
+    a = _median(times - b * spps)
+    return {"k": k, "a": a, "b": b}
+
+
+def model_time(model: dict, target: float) -> float:
+    return max(model["a"], 0.0) + model["b"] * (model["k"] / target) ** 2
+
+
+def reference(runners, spps, progress_desc):
+    """Two independent halves per renderer -> inverse-variance weighted mean, its noise MSE,
+    each renderer's converged mean and noise, and the render times."""
+    converged = {}
+    jobs = [(runner, spp // 2, half) for runner, spp in zip(runners, spps) for half in (0, 1)]
+    halves = {}
+    for runner, spp, half in tqdm(jobs, desc=progress_desc, unit="half", leave=False):
+        image, wall, _ = _clock(runner.render, max(1, spp))
+        halves.setdefault(runner.name, []).append((image.astype(np.float64), wall, max(1, spp)))
+    for name, ((a, wa, n), (b, wb, _)) in halves.items():
+        noise = float(np.mean((a - b) ** 2) / 4.0)  # MSE of (a + b) / 2 from its own noise
+        converged[name] = {"image": (a + b) / 2, "noise_mse": max(noise, 1e-30), "spp": 2 * n,
+                           "mean_var": float((a.mean() - b.mean()) ** 2 / 4.0),
+                           "seconds": wa + wb, "samples_per_s": 2 * n * a.shape[0] * a.shape[1] / (wa + wb)}
+    weights = {name: 1.0 / c["noise_mse"] for name, c in converged.items()}
+    total = sum(weights.values())
+    ref = sum(weights[name] * c["image"] for name, c in converged.items()) / total
+    return ref, 1.0 / total, converged
+
+
+def agreement(a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var_a: float = 0.0,
+              mean_var_b: float = 0.0) -> dict:
+    """How two estimates of one image differ: relative difference of the image means with its
+    1-sigma noise, per channel, and the per-pixel RMS difference beyond what the noise explains.
+
+    var_* = mean per-pixel noise variance of each image; mean_var_* = variance of each image's
+    overall mean estimated from independent repeats (catches the heavy tails and pixel
+    correlations that the independent-pixel estimate var / n misses); sigma uses the larger.
+    """
+    mean_b = float(b.mean())
+    n = a.size
+    rel = float((a.mean() - mean_b) / mean_b)
+    sigma = math.sqrt(max((var_a + var_b) / n, mean_var_a + mean_var_b)) / mean_b
+    per_channel = ((a.mean((0, 1)) - b.mean((0, 1))) / b.mean((0, 1))).tolist()
+    mse = float(np.mean((a - b) ** 2))
+    return {"mean_rel_diff": rel, "mean_rel_sigma": sigma, "channel_rel_diff": per_channel,
+            "pixel_mse_over_noise": mse / max(var_a + var_b, 1e-30),
+            "pixel_excess_rmse": math.sqrt(max(0.0, mse - var_a - var_b))}
+
+
+def verdict(check: dict, spp: int, tolerance: float = 0.01) -> str:
+    """"agree" (|mean rel diff| <= tolerance), "DIFFER" (beyond it by more than 3 sigma of the
+    noise: a bug to report, not noise) or "unresolved" (beyond it, but within the noise);
+    "not checked" below MIN_SPP_TO_JUDGE samples per pixel, where the sun's rare bright paths
+    are missing from the sample and its noise estimate is not to be trusted (quick runs)."""
+    diff, sigma = abs(check["mean_rel_diff"]), check["mean_rel_sigma"]
+    if spp < MIN_SPP_TO_JUDGE:
+        return "not checked"
+    if diff <= tolerance:
+        return "agree"
+    return "DIFFER" if diff - tolerance > 3 * sigma else "unresolved"
+
+
+def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
+    from ..render.features import analyse
+
+    features = replace(analyse(scene, device=device), max_bounces=bounces)
+    inv = InvrenderRunner(scene, camera, features, device)
+    inv.warm_up()
+    mit = MitsubaRunner(scene, camera, bounces, variant)
+    mit.warm_up()
+    runners = (inv, mit)
+
+    ref, ref_noise, converged = reference(runners, (settings.ref_spp_invrender, settings.ref_spp_mitsuba),
+                                          f"reference B={bounces}")
+    check = agreement(converged["invrender"]["image"], converged["mitsuba"]["image"],
+                      converged["invrender"]["noise_mse"], converged["mitsuba"]["noise_mse"],
+                      converged["invrender"]["mean_var"], converged["mitsuba"]["mean_var"])
+
+    # Steady-state 1-spp time, to tell the first render's one-time part from its work.
+    records = []
+    jobs = [(spp, rep) for spp in settings.ladder for rep in range(settings.repeats)]
+    # Shuffled: a burst of load from other processes hits a few renders of many rungs, not all
+    # repeats of one rung (the medians absorb the former).
+    jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]
+    for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="render", leave=False):
+        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+            image, wall, cpu = _clock(runner.render, spp)
+            mse = float(np.mean((image.astype(np.float64) - ref) ** 2))
+            records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse})
+
+    pixels = camera.width * camera.height
+    curves, summary = [], {}
+    for runner in runners:
+        rows = []
+        for spp in settings.ladder:
+            mine = [r for r in records if r["renderer"] == runner.name and r["spp"] == spp]
+            walls = [r["wall"] for r in mine]
+            mse_raw = float(np.mean([r["mse"] for r in mine]))
+            mse = max(mse_raw - ref_noise, 1e-3 * mse_raw)  # the reference's own noise removed
+            rows.append({"section": "curves", "bounces": bounces, "renderer": runner.name, "spp": spp,
+                         "wall_s": _median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
+                         "cpu_s": _median([r["cpu"] for r in mine]), "rmse": math.sqrt(mse),
+                         "rmse_raw": math.sqrt(mse_raw), "repeats": len(mine)})
+        curves += rows
+        top = rows[-1]
+        summary[runner.name] = {
+            "times": [r["wall_s"] for r in rows], "rmses": [r["rmse"] for r in rows],
+            "cpu_times": [r["cpu_s"] for r in rows],
+            "samples_per_s": pixels * top["spp"] / top["wall_s"],
+            "cpu_per_wall": top["cpu_s"] / top["wall_s"],
+            "var_per_sample": top["rmse"] ** 2 * top["spp"],
+        }
+    target = max(summary[name]["rmses"][-1] for name in summary)
+    t_inv, extra_inv = time_at_rmse(summary["invrender"]["times"], summary["invrender"]["rmses"], target)
+    t_mit, extra_mit = time_at_rmse(summary["mitsuba"]["times"], summary["mitsuba"]["rmses"], target)
+    cpu_inv, _ = time_at_rmse(summary["invrender"]["cpu_times"], summary["invrender"]["rmses"], target)
+    cpu_mit, _ = time_at_rmse(summary["mitsuba"]["cpu_times"], summary["mitsuba"]["rmses"], target)
+    model = {name: fit_model(settings.ladder, summary[name]["times"], summary[name]["rmses"]) for name in summary}
+    t_fit = {name: model_time(m, target) for name, m in model.items()}
+    s_inv, s_mit = summary["invrender"], summary["mitsuba"]
+    row = {
+        "section": "equal_rmse", "bounces": bounces, "mitsuba_variant": variant,
+        "width": camera.width, "height": camera.height, "target_rmse": target,
+        "t_invrender_s": t_inv, "t_mitsuba_s": t_mit, "ratio": t_mit / t_inv,
+        "ratio_fit": t_fit["mitsuba"] / t_fit["invrender"],
+        "fit_invrender": model["invrender"], "fit_mitsuba": model["mitsuba"], "ratio_cpu": cpu_mit / cpu_inv, "extrapolated": bool(extra_inv or extra_mit),
+        "samples_per_s_invrender": s_inv["samples_per_s"], "samples_per_s_mitsuba": s_mit["samples_per_s"],
+        "speed_ratio": s_inv["samples_per_s"] / s_mit["samples_per_s"],
+        "var_per_sample_invrender": s_inv["var_per_sample"], "var_per_sample_mitsuba": s_mit["var_per_sample"],
+        "variance_ratio": s_mit["var_per_sample"] / s_inv["var_per_sample"],
+        "cpu_per_wall_invrender": s_inv["cpu_per_wall"], "cpu_per_wall_mitsuba": s_mit["cpu_per_wall"],
+        "ref_noise_rmse": math.sqrt(ref_noise),
+        "ref_spp_invrender": converged["invrender"]["spp"], "ref_spp_mitsuba": converged["mitsuba"]["spp"],
+        "mean_rel_diff": check["mean_rel_diff"], "mean_rel_sigma": check["mean_rel_sigma"],
+        "channel_rel_diff": check["channel_rel_diff"], "pixel_excess_rmse": check["pixel_excess_rmse"],
+        "pixel_mse_over_noise": check["pixel_mse_over_noise"], "agreement": verdict(check, min(c["spp"] for c in converged.values())),
+        "features": asdict(features), "bridge_warnings": mit.bridge_warnings,
+    }
+    one_steady = {name: _median([r["wall"] for r in records if r["renderer"] == name and r["spp"] == settings.ladder[0]])
+                  for name in ("invrender", "mitsuba")}
+    one_time = [
+        {"section": "one_time", "bounces": bounces, "renderer": "invrender",
+         "scene_s": inv.one_time["pack_s"], "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
+         "setup_s": inv.one_time["init_s"], "setup_what": f"upload + kernel build (binary cache {inv.one_time['kernel_cache']})",
+         "first_render_s": inv.one_time["first_render_s"], "steady_render_s": one_steady["invrender"],
+         "reference_samples_per_s": converged["invrender"]["samples_per_s"]},
+        {"section": "one_time", "bounces": bounces, "renderer": f"mitsuba {variant}",
+         "scene_s": mit.one_time["convert_s"], "scene_what": "scene_to_mitsuba (our bridge)",
+         "setup_s": mit.one_time["load_s"], "setup_what": "mi.load_dict (plugins, BVH)",
+         "first_render_s": mit.one_time["first_render_s"], "steady_render_s": one_steady["mitsuba"],
+         "reference_samples_per_s": converged["mitsuba"]["samples_per_s"]},
+    ]
+    if row["agreement"] == "DIFFER":
+        log.error("B=%d: the converged images differ by %.2f %% in their mean (> 1 %%): a bug in one renderer "
+                  "or the bridge, not noise (sigma %.3f %%)", bounces, 100 * check["mean_rel_diff"],
+                  100 * check["mean_rel_sigma"])
+    return row, curves, one_time
+
+
+# ---------------------------------------------------------------------------------------------
+# 2. BVH build and throughput at scale (one subprocess per size)
+# ---------------------------------------------------------------------------------------------
+
+
+def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | None = None) -> dict:
+    """Runs in its own process (`python -m invrender.bench.render bvh-probe`), so that peak
+    memory is the build's and nothing else's."""
+    import tracemalloc
+
+    from ..render.bvh import build_bvh, triangle_vertices
+    from ..render.features import Features
+    from ..render.scene_buffers import SCENE_ARG_ORDER, HostScene
+    from ..scene.types import Scene
+
+    base, _ = room_scene(settings)
+    n = subdivisions_for(len(base.mesh.faces), triangles)
+    mesh = subdivide_mesh(base.mesh, n)
+    scene = Scene(mesh, base.maps, base.cameras)
+    camera = scene.cameras[settings.view]
+    v = triangle_vertices(mesh.positions, mesh.faces)
+
+    with PeakRSS() as rss:
+        bvh, wall, _ = _clock(build_bvh, *v)
+    walls = [wall] + [_clock(build_bvh, *v)[1] for _ in range(settings.bvh_repeats - 1)]
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    build_bvh(*v)
+    traced_peak = tracemalloc.get_traced_memory()[1] - before
+    tracemalloc.stop()
+
+    host, pack_wall, _ = _clock(HostScene.pack, mesh, scene.maps, bvh)
+    arrays = {name: getattr(host, name) for name in SCENE_ARG_ORDER if isinstance(getattr(host, name), np.ndarray)}
+    total_bytes = sum(a.nbytes for a in arrays.values())
+    geometry = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
+    geometry_bytes = sum(arrays[k].nbytes for k in geometry)
+    result = {
+        "section": "bvh", "triangles": int(len(mesh.faces)), "subdivision": n,
+        "build_s": _median(walls), "build_runs": len(walls), "nodes": bvh.n_nodes, "sah_cost": bvh.sah_cost(),
+        "traced_peak_mb": traced_peak / 2**20, "rss_growth_mb": rss.growth / 2**20,
+        "pack_rest_s": pack_wall, "emitters": int(host.num_emitters),
+        "device_mb": total_bytes / 2**20, "geometry_bytes_per_tri": geometry_bytes / len(mesh.faces),
+        "device_bytes_per_tri": total_bytes / len(mesh.faces),
+    }
+
+    # One bounce: camera ray + one scattered ray per sample (2 closest-hit traversals).
+    pixels = camera.width * camera.height
+    bare = Features(specular=False, emission=True, emitter_sampling=False, environment=True, window=True,
+                    env_sampling=False, max_bounces=1)
+    for key, features in (("bare", bare), ("all", Features.everything(max_bounces=1))):
+        runner = InvrenderRunner(scene, camera, features, device, host=host)
+        runner.warm_up()
+        times = [_clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
+        rate = pixels * settings.throughput_spp / _median(times)
+        result[f"invrender_{key}_samples_per_s"] = rate
+        result[f"invrender_{key}_rays_per_s"] = 2 * rate
+    if variant and settings.bvh_mitsuba:
+        runner = MitsubaRunner(scene, camera, 1, variant)
+        runner.warm_up()
+        times = [_clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
+        rate = pixels * settings.throughput_spp / _median(times)
+        result["mitsuba_load_s"] = runner.one_time["load_s"]
+        result["mitsuba_samples_per_s"] = rate
+        result["mitsuba_rays_per_s"] = 3 * rate  # camera ray, the emitter sample's shadow ray, the BSDF ray
+    return result
+
+
+def bvh_section(settings: Settings, variant: str, device=None) -> list[dict]:
+    rows = []
+    for triangles in tqdm(settings.bvh_triangles, desc="bvh sizes", unit="size", leave=False):
+        command = [sys.executable, "-m", "invrender.bench.render", "bvh-probe", "--triangles", str(triangles),
+                   "--mode", settings.mode, "--variant", variant]
+        if settings.width:
+            command += ["--width", str(settings.width), "--height", str(settings.height)]
+        if not settings.bvh_mitsuba:
+            command += ["--no-mitsuba"]
+        if device:
+            command += ["--device", device]
+        proc = subprocess.run(command, capture_output=True, text=True)
+        lines = [line for line in proc.stdout.splitlines() if line.startswith(PROBE_MARK)]
+        if proc.returncode != 0 or not lines:
+            raise RuntimeError(f"bvh probe ({triangles} triangles) failed with code {proc.returncode}:\n"
+                               f"{proc.stderr[-4000:]}")
+        rows.append(json.loads(lines[-1][len(PROBE_MARK):]))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. Specialised kernels against the all-features kernel
+# ---------------------------------------------------------------------------------------------
+
+
+def _interleaved(runners, spp, repeats, desc):
+    """Render with each runner `repeats` times, alternating the order; per runner: median wall
+    time, the mean image and the mean per-pixel noise variance of that mean."""
+    out = {id(r): {"walls": [], "images": [], "variances": []} for r in runners}
+    for rep in tqdm(range(repeats), desc=desc, unit="round", leave=False):
+        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+            result, wall, _ = _clock(runner.render_full, spp)
+            out[id(runner)]["walls"].append(wall)
+            out[id(runner)]["images"].append(result["radiance"].astype(np.float64))
+            out[id(runner)]["variances"].append(result["variance"].astype(np.float64))
+    stats = []
+    for runner in runners:
+        o = out[id(runner)]
+        means = [image.mean() for image in o["images"]]
+        stats.append({"wall": _median(o["walls"]), "image": np.mean(o["images"], 0),
+                      "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
+                      "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
+                      "var_per_sample": float(np.mean(o["variances"]) * spp)})
+    return stats
+
+
+def features_section(scene, camera, settings: Settings, device=None) -> list[dict]:
+    from ..render.features import Features, analyse_scene
+
+    rows = []
+    pixels = camera.width * camera.height
+    for case, variant_scene in (("all-diffuse, no window", diffuse_variant(scene)), ("default room", scene)):
+        analysed, _ = analyse_scene(variant_scene, device=device)
+        everything = Features.everything(max_bounces=analysed.max_bounces)
+        special = InvrenderRunner(variant_scene, camera, analysed, device)
+        full = InvrenderRunner(variant_scene, camera, everything, device, host=special.renderer.host)
+        special.warm_up()
+        full.warm_up()
+        a, b = _interleaved((special, full), settings.feature_spp, settings.feature_repeats, f"features: {case}")
+        check = agreement(a["image"], b["image"], a["var_mean"], b["var_mean"], a["mean_var"], b["mean_var"])
+        on = [k for k, v in asdict(analysed).items() if v is True]
+        rows.append({
+            "section": "features", "case": case, "features": ",".join(on) or "(none)",
+            "bounces": analysed.max_bounces, "spp": settings.feature_spp, "repeats": settings.feature_repeats,
+            "t_per_sample_specialised_us": 1e6 * a["wall"] / (pixels * settings.feature_spp),
+            "t_per_sample_everything_us": 1e6 * b["wall"] / (pixels * settings.feature_spp),
+            "speedup": b["wall"] / a["wall"], "mean_rel_diff": check["mean_rel_diff"],
+            "mean_rel_sigma": check["mean_rel_sigma"], "pixel_mse_over_noise": check["pixel_mse_over_noise"],
+            "agreement": verdict(check, settings.feature_spp * settings.feature_repeats),
+        })
+        if rows[-1]["agreement"] == "DIFFER":
+            log.error("features %s: specialised and all-features images differ by %.2f %% (> 1 %%)",
+                      case, 100 * check["mean_rel_diff"])
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. Profile: where invrender's time and variance go
+# ---------------------------------------------------------------------------------------------
+
+
+def profile_section(scene, camera, settings: Settings, variant: str, device=None) -> list[dict]:
+    from ..render.features import Features, analyse
+
+    analysed = analyse(scene, device=device)
+    bounces = analysed.max_bounces
+    cases = [
+        ("all features (analysed)", analysed, 0.25, 0.25, True),
+        ("emitter sampling off", replace(analysed, emitter_sampling=False), 0.25, 0.0, True),
+        ("env sampling off", replace(analysed, env_sampling=False), 0.0, 0.25, True),
+        ("emitter + env sampling off", replace(analysed, emitter_sampling=False, env_sampling=False), 0.0, 0.0, True),
+        # Compiled in but almost never drawn: the paths are those of "... sampling off", so the
+        # time difference is the cost of evaluating the strategy's density at every vertex
+        # (for the emitters, the all-hits traversal of their BVH).
+        ("emitter density only (w_emit 0.001)", analysed, 0.25, 0.001, True),
+        ("env density only (w_env 0.001)", analysed, 0.001, 0.25, True),
+        ("weights env 0.1, emit 0.1", analysed, 0.1, 0.1, True),
+        ("weights env 0.1, emit 0.4", analysed, 0.1, 0.4, True),
+        ("weights env 0.4, emit 0.1", analysed, 0.4, 0.1, True),
+        ("Lambertian, no sampling strategies", replace(analysed, specular=False, emitter_sampling=False,
+                                                       env_sampling=False), 0.0, 0.0, False),
+    ]
+    pixels = camera.width * camera.height
+    host = None
+    runners = []
+    for name, features, w_env, w_emit, same_image in cases:
+        runner = InvrenderRunner(scene, camera, features, device, host=host, w_env=w_env, w_emit=w_emit)
+        host = runner.renderer.host
+        runner.warm_up()
+        runners.append(runner)
+    stats = _interleaved(runners, settings.profile_spp, settings.profile_repeats, f"profile B={bounces}")
+    base = stats[0]
+    rows = []
+    for (name, features, w_env, w_emit, same_image), s in zip(cases, stats):
+        t = s["wall"] / (pixels * settings.profile_spp)
+        rows.append({
+            "section": "profile", "case": name, "renderer": "invrender", "bounces": bounces,
+            "t_per_sample_us": 1e6 * t, "var_per_sample": s["var_per_sample"],
+            "efficiency_vs_all": (base["var_per_sample"] * base["wall"]) / (s["var_per_sample"] * s["wall"]),
+            "time_vs_all": s["wall"] / base["wall"],
+            "mean_rel_diff_vs_all": agreement(s["image"], base["image"], s["var_mean"], base["var_mean"])["mean_rel_diff"]
+            if same_image else None,
+        })
+
+    # Mitsuba at the same depth: time and variance per sample from pairs of independent renders.
+    mit = MitsubaRunner(scene, camera, bounces, variant)
+    mit.warm_up()
+    walls, images = [], []
+    for _ in tqdm(range(max(2, settings.profile_repeats)), desc="profile mitsuba", leave=False):
+        image, wall, _ = _clock(mit.render, settings.profile_spp)
+        walls.append(wall)
+        images.append(image.astype(np.float64))
+    pair_var = np.mean([np.mean((images[k] - images[k + 1]) ** 2) / 2 for k in range(len(images) - 1)])
+    t = _median(walls) / (pixels * settings.profile_spp)
+    var = float(pair_var * settings.profile_spp)
+    rows.append({
+        "section": "profile", "case": f"mitsuba {variant} path", "renderer": "mitsuba", "bounces": bounces,
+        "t_per_sample_us": 1e6 * t, "var_per_sample": var,
+        "efficiency_vs_all": (base["var_per_sample"] * base["wall"] / (pixels * settings.profile_spp)) / (var * t),
+        "time_vs_all": t / (base["wall"] / (pixels * settings.profile_spp)), "mean_rel_diff_vs_all": None,
+    })
+
+    # One bounce (B = 1) ray throughput on the room as it is.
+    bare = Features(specular=False, emission=True, emitter_sampling=False, environment=True, window=True,
+                    env_sampling=False, max_bounces=1)
+    one = [InvrenderRunner(scene, camera, f, device, host=host) for f in (bare, replace(analysed, max_bounces=1))]
+    for r in one:
+        r.warm_up()
+    mit1 = MitsubaRunner(scene, camera, 1, variant)
+    mit1.warm_up()
+    spp = settings.profile_spp
+    walls = {id(r): [] for r in (*one, mit1)}
+    for rep in tqdm(range(settings.profile_repeats), desc="one-bounce throughput", leave=False):
+        for r in (*one, mit1) if rep % 2 == 0 else (mit1, *one[::-1]):
+            walls[id(r)].append(_clock(r.render, spp)[1])
+    for name, r, rays in (("one bounce, Lambertian closest-hit only", one[0], 2),
+                          ("one bounce, all features", one[1], 2),
+                          (f"one bounce, mitsuba {variant} (max_depth 2)", mit1, 3)):
+        rate = pixels * spp / _median(walls[id(r)])
+        rows.append({"section": "profile", "case": name, "renderer": r.name, "bounces": 1,
+                     "t_per_sample_us": 1e6 / rate, "rays_per_s": rays * rate, "samples_per_s": rate})
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------------------------
+
+TABLES = {
+    "equal_rmse": ("Time to equal RMSE (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender faster)", [
+        ("bounces", "B", "d"), ("width", "W", "d"), ("height", "H", "d"), ("target_rmse", "target RMSE", ".4g"),
+        ("t_invrender_s", "t inv [s]", ".3g"), ("t_mitsuba_s", "t mi [s]", ".3g"), ("ratio", "ratio", ".3f"),
+        ("ratio_fit", "ratio (fit)", ".3f"), ("ratio_cpu", "ratio (CPU time)", ".3f"),
+        ("speed_ratio", "samples/s inv/mi", ".3f"),
+        ("variance_ratio", "var/sample mi/inv", ".3f"), ("ref_noise_rmse", "ref noise RMSE", ".2g"),
+        ("mean_rel_diff", "mean rel diff", "+.3%"), ("mean_rel_sigma", "(1 sigma)", ".3%"),
+        ("agreement", "images", "s"), ("pixel_excess_rmse", "pixel bias RMSE", ".2g")]),
+    "one_time": ("One-time costs, excluded from the times above [s]", [
+        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("scene_s", "scene", ".3f"), ("scene_what", "= what", "s"),
+        ("setup_s", "setup", ".3f"), ("setup_what", "= what", "s"), ("first_render_s", "first render (1 spp)", ".3f"),
+        ("steady_render_s", "later 1-spp render", ".4f"), ("reference_samples_per_s", "samples/s (reference)", ".3g")]),
+    "curves": ("RMSE against time (the ladders; RMSE with the reference's noise removed)", [
+        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("spp", "spp", "d"), ("wall_s", "wall [s]", ".4f"),
+        ("wall_min_s", "min", ".4f"), ("wall_max_s", "max", ".4f"), ("cpu_s", "cpu [s]", ".4f"), ("rmse", "RMSE", ".4g"),
+        ("rmse_raw", "RMSE raw", ".4g")]),
+    "bvh": ("BVH build and one-bounce throughput at scale (room subdivided)", [
+        ("triangles", "triangles", "d"), ("build_s", "build [s]", ".2f"), ("traced_peak_mb", "peak alloc [MB]", ".0f"),
+        ("rss_growth_mb", "peak RSS growth [MB]", ".0f"), ("pack_rest_s", "rest of pack [s]", ".2f"),
+        ("geometry_bytes_per_tri", "geometry B/tri", ".1f"), ("device_bytes_per_tri", "device B/tri", ".1f"),
+        ("invrender_bare_rays_per_s", "inv rays/s bare", ".3g"), ("invrender_all_rays_per_s", "inv rays/s all", ".3g"),
+        ("mitsuba_rays_per_s", "mi rays/s", ".3g"), ("mitsuba_load_s", "mi load [s]", ".2f")]),
+    "features": ("Specialised kernels against the all-features kernel (time per sample, median of repeats)", [
+        ("case", "case", "s"), ("features", "analysed features", "s"), ("bounces", "B", "d"),
+        ("t_per_sample_specialised_us", "specialised [us]", ".3f"), ("t_per_sample_everything_us", "everything [us]", ".3f"),
+        ("speedup", "speed-up", ".3f"), ("mean_rel_diff", "mean rel diff", "+.3%"), ("mean_rel_sigma", "(1 sigma)", ".3%"),
+        ("agreement", "images", "s"), ("pixel_mse_over_noise", "pixel MSE / noise", ".2f")]),
+    "profile": ("Profile of invrender (default room): time, variance and efficiency = 1 / (variance x time) per sample", [
+        ("case", "case", "s"), ("bounces", "B", "d"), ("t_per_sample_us", "t/sample [us]", ".3f"),
+        ("var_per_sample", "var/sample", ".4g"), ("time_vs_all", "time vs all", ".3f"),
+        ("efficiency_vs_all", "efficiency vs all", ".3f"), ("mean_rel_diff_vs_all", "mean rel diff", "+.2%"),
+        ("rays_per_s", "rays/s", ".3g")]),
+}
+
+
+def _cell(value, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-" if value is None else str(value)
+    if fmt.endswith("%"):
+        return format(float(value), fmt)
+    if fmt == "d":
+        return str(int(value))
+    if fmt == "s":
+        return str(value)
+    return format(float(value), fmt)
+
+
+def format_table(title: str, columns, rows) -> str:
+    cells = [[header for _, header, _ in columns]]
+    cells += [[_cell(row.get(key), fmt) for key, _, fmt in columns] for row in rows]
+    widths = [max(len(r[k]) for r in cells) for k in range(len(columns))]
+    line = lambda r: "| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |"
+    sep = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
+    return "\n".join([f"### {title}", "", line(cells[0]), sep] + [line(r) for r in cells[1:]]) + "\n"
+
+
+def write_csv(path: Path, rows: list[dict]):
+    keys = []
+    for row in rows:
+        keys += [k for k in row if k not in keys]
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=keys)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
+
+
+def plot(curves: list[dict], equal: list[dict], path: Path) -> str | None:
+    """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return "matplotlib is not installed: plot skipped (the curves are in render_curves.csv)"
+    bounces = sorted({c["bounces"] for c in curves})
+    fig, axes = plt.subplots(1, len(bounces), figsize=(5 * len(bounces), 4), squeeze=False)
+    for ax, b in zip(axes[0], bounces):
+        for name, style in (("invrender", "o-"), ("mitsuba", "s--")):
+            pts = [c for c in curves if c["bounces"] == b and c["renderer"] == name]
+            ax.loglog([p["wall_s"] for p in pts], [p["rmse"] for p in pts], style, label=name)
+        target = [e for e in equal if e["bounces"] == b][0]["target_rmse"]
+        ax.axhline(target, color="grey", lw=0.8, ls=":")
+        ax.set_title(f"{b} bounces")
+        ax.set_xlabel("wall time per image [s]")
+        ax.set_ylabel("RMSE vs reference")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return None
+
+
+def machine_info(device=None) -> dict:
+    info = {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count()}
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                info["cpu"] = line.split(":", 1)[1].strip()
+                break
+        info["memory_gb"] = round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1)
+    except (OSError, ValueError):
+        pass
+    try:
+        from ..render.device import choose_device, describe
+
+        info["opencl_device"] = describe(choose_device(device))
+    except Exception as error:  # noqa: BLE001 - informational only
+        info["opencl_device"] = f"unknown ({error})"
+    try:
+        import drjit
+        import mitsuba
+
+        info["mitsuba"], info["drjit"] = mitsuba.__version__, drjit.__version__
+        info["DRJIT_LIBLLVM_PATH"] = os.environ.get("DRJIT_LIBLLVM_PATH")
+    except ImportError:
+        pass
+    info["numpy"] = np.__version__
+    try:
+        root = Path(__file__).resolve().parents[3]
+        info["git_commit"] = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+                                            capture_output=True, text=True).stdout.strip()
+    except OSError:
+        pass
+    return info
+
+
+# ---------------------------------------------------------------------------------------------
+# The benchmark
+# ---------------------------------------------------------------------------------------------
+
+
+def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
+    _quiet_pyopencl()
+    settings = QUICK if quick else FULL
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    notes = []
+    variant, why = choose_variant()
+    if variant != "llvm_ad_rgb":
+        settings = scalar_settings(settings)
+        notes.append(why)
+        log.warning("%s", why)
+    started = time.time()
+    load_start = os.getloadavg()
+    log.info("bench render (%s): Mitsuba %s, out %s", settings.mode, variant, out)
+
+    scene, _ = room_scene(settings)
+    camera = scene.cameras[settings.view]
+    results = {"equal_rmse": [], "curves": [], "one_time": []}
+    for bounces in tqdm(settings.bounces, desc="equal RMSE", unit="B"):
+        row, curves, one_time = equal_rmse(scene, camera, bounces, settings, variant, device)
+        results["equal_rmse"].append(row)
+        results["curves"] += curves
+        results["one_time"] += one_time
+        if row["agreement"] not in ("agree", "not checked"):
+            notes.append(f"B={bounces}: converged invrender and Mitsuba images differ by "
+                         f"{100 * row['mean_rel_diff']:+.2f} % in their mean (1 sigma "
+                         f"{100 * row['mean_rel_sigma']:.2f} %): "
+                         + ("a bug, not noise" if row["agreement"] == "DIFFER" else
+                            "within the noise of this run's references (quick runs cannot resolve 1 %)"))
+
+    for warning in sorted({w for row in results["equal_rmse"] for w in row["bridge_warnings"]}):
+        notes.append(f"mitsuba bridge: {warning}")
+    log.info("BVH at scale ...")
+    results["bvh"] = bvh_section(settings, variant, device)
+    log.info("specialised kernels ...")
+    results["features"] = features_section(scene, camera, settings, device)
+    for row in results["features"]:
+        if row["agreement"] not in ("agree", "not checked"):
+            notes.append(f"features, {row['case']}: specialised and all-features images differ by "
+                         f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
+                         + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run"))
+    log.info("profile ...")
+    results["profile"] = profile_section(scene, camera, settings, variant, device)
+
+    note = plot(results["curves"], results["equal_rmse"], out / "render_rmse_vs_time.png")
+    if note:
+        notes.append(note)
+    machine = machine_info(device)
+    machine["load_average_start"] = load_start
+    machine["load_average_end"] = os.getloadavg()
+    report = {"benchmark": "render", "mode": settings.mode, "mitsuba_variant": variant, "settings": asdict(settings),
+              "machine": machine, "seconds": time.time() - started, "notes": notes, **results}
+
+    text = [f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
+            f"room view {settings.view}; {report['seconds']:.0f} s)", ""]
+    for key in ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"):
+        title, columns = TABLES[key]
+        text.append(format_table(title, columns, results[key]))
+    text.append("Machine: " + ", ".join(f"{k}={v}" for k, v in machine.items()))
+    for n in notes:
+        text.append(f"NOTE: {n}")
+    table = "\n".join(text) + "\n"
+
+    (out / "render.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
+    for key in ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"):
+        write_csv(out / f"render_{key}.csv", results[key])
+    (out / "render_table.md").write_text(table)
+    sys.stdout.write(table)
+    sys.stdout.flush()
+    return report
+
+
+def _main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="helpers of `invrender bench render`")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("bvh-probe", help="one BVH size, measured in this process; prints one JSON line")
+    p.add_argument("--triangles", type=int, required=True)
+    p.add_argument("--mode", choices=["full", "quick"], default="full")
+    p.add_argument("--width", type=int)
+    p.add_argument("--height", type=int)
+    p.add_argument("--variant")
+    p.add_argument("--no-mitsuba", action="store_true")
+    p.add_argument("--device")
+    args = parser.parse_args(argv)
+    settings = QUICK if args.mode == "quick" else FULL
+    settings = replace(settings, width=args.width or settings.width, height=args.height or settings.height,
+                       bvh_mitsuba=settings.bvh_mitsuba and not args.no_mitsuba)
+    _quiet_pyopencl()
+    result = bvh_probe(args.triangles, settings, args.device, args.variant)
+    print(PROBE_MARK + json.dumps(result), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())
