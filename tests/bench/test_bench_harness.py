@@ -1,0 +1,116 @@
+"""The `invrender bench render` harness at its --quick sizes: it runs end to end through the
+CLI, writes its tables, and its numbers are well formed. Nothing here is a measurement: the
+full run and its reading are in docs/benchmarks.md."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from invrender.bench.render import subdivide_mesh, time_at_rmse
+from invrender.cli import main
+from invrender.synthesize.room import make_room
+
+TABLES = ("equal_rmse", "one_time", "curves", "bvh", "features", "profile")
+
+
+def _finite_positive(value) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    assert main(["bench", "render", "--quick", "--out", str(out)]) == 0
+    return out, json.loads((out / "render.json").read_text())
+
+
+def test_quick_run_writes_every_table(quick_run, capsys):
+    out, report = quick_run
+    for key in TABLES:
+        assert (out / f"render_{key}.csv").stat().st_size > 0
+        assert report[key], key
+    assert (out / "render_table.md").read_text().startswith("# invrender bench render (quick")
+    try:
+        import matplotlib  # noqa: F401
+
+        assert (out / "render_rmse_vs_time.png").exists()
+    except ImportError:
+        assert any("matplotlib" in note for note in report["notes"])
+
+
+def test_equal_rmse_rows_for_3_and_10_bounces(quick_run):
+    _, report = quick_run
+    rows = report["equal_rmse"]
+    assert [row["bounces"] for row in rows] == [3, 10]
+    for row in rows:
+        for key in ("target_rmse", "t_invrender_s", "t_mitsuba_s", "ratio", "ratio_fit", "speed_ratio",
+                    "variance_ratio", "ref_noise_rmse"):
+            assert _finite_positive(row[key]), (key, row[key])
+        assert row["ref_noise_rmse"] < row["target_rmse"]
+        assert math.isfinite(row["mean_rel_diff"])
+    assert {(r["bounces"], r["renderer"]) for r in report["curves"]} == {
+        (b, n) for b in (3, 10) for n in ("invrender", "mitsuba")}
+    assert len(report["one_time"]) == 4
+
+
+def test_bvh_features_and_profile_rows(quick_run):
+    _, report = quick_run
+    (bvh,) = report["bvh"]
+    assert 15_000 < bvh["triangles"] < 30_000
+    for key in ("build_s", "traced_peak_mb", "device_bytes_per_tri", "invrender_bare_rays_per_s"):
+        assert _finite_positive(bvh[key]), key
+    assert [row["case"] for row in report["features"]] == ["all-diffuse, no window", "default room"]
+    for row in report["features"]:
+        assert _finite_positive(row["speedup"])
+        assert row["agreement"] in ("agree", "not checked")
+    assert report["features"][0]["features"] == "emission,emitter_sampling"
+    cases = [row["case"] for row in report["profile"]]
+    assert any(case.startswith("mitsuba") for case in cases)
+    assert all(_finite_positive(row["t_per_sample_us"]) for row in report["profile"])
+
+
+def test_time_at_rmse_interpolates_log_log_and_extrapolates_as_one_over_sqrt_t():
+    times = np.array([1.0, 2.0, 4.0, 8.0])
+    rmses = 3.0 / np.sqrt(times)
+    assert time_at_rmse(times, rmses, 3.0 / math.sqrt(3.0)) == (pytest.approx(3.0), False)
+    t, extrapolated = time_at_rmse(times, rmses, 3.0 / 4.0)
+    assert extrapolated and t == pytest.approx(16.0)
+
+
+def test_subdivision_is_watertight_and_keeps_area_and_winding():
+    scene, _ = make_room()
+    mesh, fine = scene.mesh, subdivide_mesh(scene.mesh, 3)
+    assert len(fine.faces) == 9 * len(mesh.faces)
+
+    def normals(m):
+        p = m.positions.astype(np.float64)
+        return np.cross(p[m.faces[:, 1]] - p[m.faces[:, 0]], p[m.faces[:, 2]] - p[m.faces[:, 0]])
+
+    n0, n1 = normals(mesh), normals(fine)
+    assert np.linalg.norm(n1, axis=1).sum() == pytest.approx(np.linalg.norm(n0, axis=1).sum(), rel=1e-6)
+    assert np.all(np.einsum("ij,ij->i", np.repeat(n0, 9, 0), n1) > 0)
+
+    def open_edges(m):  # edges (by vertex position) used by one face only
+        ids = np.unique(m.positions, axis=0, return_inverse=True)[1].ravel()[m.faces]
+        edges = np.sort(np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]]), 1)
+        return int(np.sum(np.unique(edges, axis=0, return_counts=True)[1] == 1))
+
+    assert open_edges(fine) == 3 * open_edges(mesh)  # the room's own open edges, each cut in 3
+
+
+def test_scalar_fallback_says_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("INVRENDER_BENCH_MITSUBA_VARIANT", "scalar_rgb")
+    from invrender.bench.render import run
+
+    from invrender.render import mitsuba_bridge
+
+    try:
+        report = run(quick=True, out=tmp_path)
+    finally:  # later tests in this process expect the default variant
+        mitsuba_bridge.set_variant(mitsuba_bridge.DEFAULT_VARIANT)
+    assert report["mitsuba_variant"] == "scalar_rgb"
+    assert any("scalar_rgb" in note for note in report["notes"])
+    assert report["equal_rmse"][0]["width"] == 16
+    assert all(_finite_positive(row["ratio"]) for row in report["equal_rmse"])
