@@ -27,7 +27,10 @@ inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
     return sp;
 }
 
-inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uint ray_id, uint sample)
+/* *suspect is set when a path ends on a density or weight that is not a positive finite number
+ * for a direction its strategy did draw: never on a correct scene, so the host counts it. */
+inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uint ray_id, uint sample,
+                         int* suspect)
 {
     float3 radiance = (float3)(0.0f), beta = (float3)(1.0f);
     int skip = -1;
@@ -56,10 +59,16 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         float3 x = offset_ray_origin(sp.p, sp.n);
         float pdf = pdf_mixture(s, &w, &m, x, sp.n, wo, wi);
         float3 f = bsdf_cos(&m, sp.n, wo, wi);
-        if (!(pdf > 0.0f))
+        if (!(pdf > 0.0f) || !isfinite(pdf)) {
+            *suspect = 1;
             break;
+        }
         beta *= f / pdf;
-        if (!all_finite3(beta) || !(max3(beta) > 0.0f))
+        if (!all_finite3(beta)) {
+            *suspect = 1;
+            break;
+        }
+        if (!(max3(beta) > 0.0f))
             break;
         o = x;
         d = wi;

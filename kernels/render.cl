@@ -14,8 +14,9 @@
 #include "integrator.h"
 
 /* Adds samples [sample_start, sample_start + sample_count) of each request to accum (sum of L,
- * w = number of non-finite samples dropped) and accum_sq (sum of L^2, for error bars). Long
- * renders are split into several launches by the host (progress, GPU watchdogs). */
+ * w = number of non-finite samples dropped) and accum_sq (sum of L^2, for error bars; w = number
+ * of paths ended on a suspect density or weight). Long renders are split into several launches
+ * by the host (progress, GPU watchdogs). */
 kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
                         global const int4* requests, int num_requests, ulong seed,
                         uint sample_start, uint sample_count, global float4* accum,
@@ -28,11 +29,13 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
     int4 q = requests[i];
     global const CameraData* cam = cameras + q.x;
     float3 sum = (float3)(0.0f), sum_sq = (float3)(0.0f);
-    float dropped = 0.0f;
+    float dropped = 0.0f, suspects = 0.0f;
     for (uint k = sample_start; k < sample_start + sample_count; ++k) {
         float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
         float3 d = camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
-        float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k);
+        int suspect = 0;
+        float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect);
+        suspects += (float)suspect;
         if (!all_finite3(L)) {
             dropped += 1.0f;
             continue;
@@ -41,7 +44,7 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
         sum_sq += L * L;
     }
     accum[i] += (float4)(sum, dropped);
-    accum_sq[i] += (float4)(sum_sq, 0.0f);
+    accum_sq[i] += (float4)(sum_sq, suspects);
 }
 
 /* Ground-truth buffers through pixel centres: depth along the optical axis (inf on a miss),

@@ -69,11 +69,15 @@ inline float pdf_mixture(const SceneData* s, const MixtureWeights* w, const Mate
     if (w->specular > 0.0f)
         pdf += w->specular * pdf_specular(n, wo, wi, m->ka);
 #endif
+    /* A strategy with weight 0 has nothing to sample (a black sky, no emitters): its density is
+     * not even evaluated, so no 0 x garbage can reach the sum. */
 #ifdef FEATURE_ENV_SAMPLING
-    pdf += w->env * pdf_environment(s, wi);
+    if (w->env > 0.0f)
+        pdf += w->env * pdf_environment(s, wi);
 #endif
 #ifdef FEATURE_EMITTER_SAMPLING
-    pdf += w->emit * pdf_emitter(s, x, wi);
+    if (w->emit > 0.0f)
+        pdf += w->emit * pdf_emitter(s, x, wi);
 #endif
     return pdf;
 }

@@ -67,8 +67,10 @@ class Renderer:
     # --- rendering -----------------------------------------------------------------------
     def render_requests(self, cameras: list[Camera], requests: np.ndarray, spp: int, seed: int = 0,
                         progress: bool = False) -> tuple[np.ndarray, np.ndarray, int]:
-        """Mean radiance (n, 3), the variance of that mean (n, 3), and the count of non-finite
-        samples dropped (0 unless something is wrong), for int4 requests (camera, x, y, ray id)."""
+        """Mean radiance (n, 3), the variance of that mean (n, 3), and the count of samples that
+        were dropped (non-finite radiance) or whose path ended on a density or weight that was not
+        a positive finite number: 0 unless something is wrong. For int4 requests
+        (camera, x, y, ray id)."""
         n = len(requests)
         cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
         accum, accum_buf = self._zeros((n, 4))
@@ -85,7 +87,7 @@ class Renderer:
             self.queue.finish()
         cl.enqueue_copy(self.queue, accum, accum_buf)
         cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
-        dropped = int(accum[:, 3].sum())
+        dropped = int(accum[:, 3].sum() + accum_sq[:, 3].sum())
         kept = np.maximum(spp - accum[:, 3:4], 1)
         mean = accum[:, :3] / kept
         variance = np.maximum(accum_sq[:, :3] / kept - mean**2, 0) / kept

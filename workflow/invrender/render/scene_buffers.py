@@ -84,11 +84,11 @@ def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, bo
     """P(texel) ~ luminance x solid angle over the 6 N N cube texels, its inclusive CDF, and
     whether the sky is black (then the distribution is uniform and must get weight 0)."""
     n = kg.shape[1]
-    weight = (kg.reshape(6, n, n, 3) @ LUMINANCE) * cube_texel_solid_angles(n)
-    weight = np.maximum(weight.ravel(), 0.0)
+    solid_angle = np.broadcast_to(cube_texel_solid_angles(n), (6, n, n))
+    weight = np.maximum(((kg.reshape(6, n, n, 3) @ LUMINANCE) * solid_angle).ravel(), 0.0)
     black = not weight.sum() > 0
-    if black:  # any valid density will do: it gets weight 0
-        weight = cube_texel_solid_angles(n).ravel()
+    if black:  # any valid density over all 6 N N texels will do: it gets weight 0
+        weight = solid_angle.ravel()
     pmf = weight / weight.sum()
     cdf = np.cumsum(pmf)
     cdf[-1] = 1.0
