@@ -13,24 +13,10 @@ import pytest
 from scipy.spatial import cKDTree
 
 from invrender.geometry.clean import mean_point_spacing, reconstruct
+from rooms import ROOM, sample_room
 
-ROOM = np.array([4.0, 3.0, 5.0])
 HOLES = np.array([[2.0, 1.5, 0.0], [0.0, 1.0, 2.5], [4.0, 2.0, 4.0], [1.0, 3.0, 1.0]])
 HOLE_RADIUS = 0.25
-
-
-def sample_room(n, rng):
-    """n points uniformly on the box's six sides, with inward normals."""
-    sides = [(axis, side) for axis in range(3) for side in (0, 1)]
-    areas = np.array([np.prod(np.delete(ROOM, axis)) for axis, _ in sides])
-    which = rng.choice(len(sides), size=n, p=areas / areas.sum())
-    points = rng.random((n, 3)) * ROOM
-    normals = np.zeros((n, 3))
-    for k, (axis, side) in enumerate(sides):
-        sel = which == k
-        points[sel, axis] = side * ROOM[axis]
-        normals[sel, axis] = -1.0 if side else 1.0
-    return points, normals
 
 
 def sample_surface(positions, faces, n, rng):

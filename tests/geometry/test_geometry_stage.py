@@ -12,21 +12,12 @@ from invrender.cli import main
 from invrender.geometry.atlas import AtlasTexels, dilate, texel_index
 from invrender.geometry.stage import run_geometry
 from invrender.scene.mesh_io import read_mesh
+from rooms import ROOM, sample_room
 from invrender.scene.types import SceneError
-
-ROOM = np.array([4.0, 3.0, 5.0])
-
 
 def room_cloud(path, n, rng, noise=0.01):
     """A PLY point cloud on the sides of a 4 x 3 x 5 m box, inward normals, Gaussian noise."""
-    sides = [(axis, side) for axis in range(3) for side in (0, 1)]
-    areas = np.array([np.prod(np.delete(ROOM, axis)) for axis, _ in sides])
-    which = rng.choice(len(sides), size=n, p=areas / areas.sum())
-    points = rng.random((n, 3)) * ROOM
-    normals = np.zeros((n, 3))
-    for k, (axis, side) in enumerate(sides):
-        points[which == k, axis] = side * ROOM[axis]
-        normals[which == k, axis] = -1.0 if side else 1.0
+    points, normals = sample_room(n, rng)
     points += rng.normal(scale=noise, size=points.shape)
     vertex = np.empty(n, dtype=[(c, "f4") for c in ("x", "y", "z", "nx", "ny", "nz")])
     for i, c in enumerate("xyz"):

@@ -19,9 +19,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-import plyfile
 import pymeshlab
 
+from ..scene.mesh_io import obj_statements, read_ply_vertices
 from ..scene.types import SceneError
 
 __all__ = [
@@ -46,37 +46,19 @@ NO_FACES = "a mesh with faces, or a point cloud with normals"
 
 def _read_ply_header(path: Path):
     """(positions (V, 3) float64, normals (V, 3) or None, face count) of a PLY file."""
-    try:
-        data = plyfile.PlyData.read(str(path))
-    except (plyfile.PlyParseError, ValueError, OSError, IndexError, EOFError) as exc:
-        raise SceneError(path, "(file)", f"a readable PLY file ({exc})") from None
-    names = [el.name for el in data.elements]
-    if "vertex" not in names:
-        raise SceneError(path, "element vertex", "a vertex element")
+    data, positions, props = read_ply_vertices(path)
     vertex = data["vertex"]
-    props = {p.name for p in vertex.properties}
-    missing = [c for c in "xyz" if c not in props]
-    if missing:
-        raise SceneError(path, "vertex x,y,z", f"vertex properties x, y, z; missing {','.join(missing)}")
-    positions = np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=1)
     normals = None
     if all(c in props for c in ("nx", "ny", "nz")):
         normals = np.stack([np.asarray(vertex[c], np.float64) for c in ("nx", "ny", "nz")], axis=1)
-    faces = data["face"].count if "face" in names else 0
+    faces = data["face"].count if "face" in [el.name for el in data.elements] else 0
     return positions, normals, faces
 
 
 def _read_obj_header(path: Path):
     """(positions, normals or None, face count) of an OBJ file; normals only when one per v."""
     positions, normals, faces = [], [], 0
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise SceneError(path, "(file)", f"a readable OBJ file ({exc})") from None
-    for line_no, line in enumerate(text.splitlines(), 1):
-        parts = line.split("#", 1)[0].split()
-        if not parts:
-            continue
+    for line_no, parts in obj_statements(path):
         if parts[0] in ("v", "vn"):
             try:
                 values = [float(x) for x in parts[1:4]]

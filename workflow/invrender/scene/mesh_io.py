@@ -117,23 +117,31 @@ def _read_plydata(path: Path) -> plyfile.PlyData:
             if "unexpected list length" not in str(exc):
                 raise
             data = plyfile.PlyData.read(str(path), mmap=False)
-    except (plyfile.PlyParseError, ValueError, OSError) as exc:
+    except (plyfile.PlyParseError, ValueError, OSError, IndexError, EOFError) as exc:
         raise SceneError(path, "(file)", f"a readable PLY file ({exc})") from None
     return data
 
 
-def read_ply(path, require_uvs: bool = True) -> Mesh:
+def read_ply_vertices(path):
+    """(PlyData, positions (V, 3) float64, names of the vertex properties) of a PLY file, with
+    one SceneError for an unreadable file, no vertex element or no x, y, z."""
     path = Path(path)
     data = _read_plydata(path)
-    names = [el.name for el in data.elements]
-    if "vertex" not in names:
+    if "vertex" not in [el.name for el in data.elements]:
         raise SceneError(path, "element vertex", "a vertex element")
     vertex = data["vertex"]
     vprops = {p.name for p in vertex.properties}
     missing = [c for c in "xyz" if c not in vprops]
     if missing:
         raise SceneError(path, "vertex x,y,z", f"vertex properties x, y, z; missing {','.join(missing)}")
-    positions = np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=1)
+    return data, np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=1), vprops
+
+
+def read_ply(path, require_uvs: bool = True) -> Mesh:
+    path = Path(path)
+    data, positions, vprops = read_ply_vertices(path)
+    names = [el.name for el in data.elements]
+    vertex = data["vertex"]
     uvs = None
     for a, b in UV_PROPERTY_PAIRS:
         if a in vprops and b in vprops:
@@ -258,19 +266,25 @@ def _check_obj_indices(path, corners, count: int, starts, kind: str) -> None:
         raise SceneError(path, f"face {face} {kind}", f"indices in [1, {count}] (the {kind} count), got {corners[k] + 1}")
 
 
-def read_obj(path, require_uvs: bool = True) -> Mesh:
+def obj_statements(path):
+    """(line number, words) of every non-empty, non-comment line of an OBJ file."""
     path = Path(path)
-    positions, texcoords = [], []
-    corners_v, corners_vt, polygon_sizes = [], [], []
-    any_without_vt = False
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise SceneError(path, "(file)", f"a readable OBJ file ({exc})") from None
     for line_no, line in enumerate(text.splitlines(), 1):
         parts = line.split("#", 1)[0].split()
-        if not parts:
-            continue
+        if parts:
+            yield line_no, parts
+
+
+def read_obj(path, require_uvs: bool = True) -> Mesh:
+    path = Path(path)
+    positions, texcoords = [], []
+    corners_v, corners_vt, polygon_sizes = [], [], []
+    any_without_vt = False
+    for line_no, parts in obj_statements(path):
         tag = parts[0]
         try:
             if tag == "v":
