@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-mb = pytest.importorskip("invrender.render.mitsuba_bridge")
+# The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
+import invrender.render.mitsuba_bridge as mb  # isort: skip
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
-
 from invrender.render.sampling import cube_to_direction, direction_to_cube, lookup_cube  # noqa: E402
 from invrender.scene.types import Camera, Maps, Mesh, Scene  # noqa: E402
 

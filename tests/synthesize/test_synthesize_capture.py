@@ -105,16 +105,6 @@ def test_failed_render_leaves_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def _opencl_available():
-    try:
-        import pyopencl as cl
-
-        return bool(cl.get_platforms())
-    except Exception:
-        return False
-
-
-@pytest.mark.skipif(not _opencl_available(), reason="no OpenCL platform")
 def test_real_renderer_masks_match_the_mesh(tmp_path):
     """With the OpenCL renderer: the mask is the instance id of the triangle each pixel sees,
     and every copy shows up."""
@@ -135,7 +125,6 @@ def test_real_renderer_masks_match_the_mesh(tmp_path):
     assert metadata["poses"] == meta["poses"]
 
 
-@pytest.mark.skipif(not _opencl_available(), reason="no OpenCL platform")
 def test_real_renderer_sees_the_baked_emission():
     """Pixels well inside a ceiling light show the ke the maps hold at the uv the renderer
     reports there (kd = ks = 0, so nothing is reflected): the atlas convention is the renderer's."""

@@ -138,7 +138,7 @@ def _resources_by_rule(output: str) -> dict[str, str]:
 
 @pytest.mark.parametrize("device, gpus", [("NVIDIA", 1), ("pocl", 0), (None, 0)])
 def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
-    pytest.importorskip("snakemake_executor_plugin_slurm")
+    import snakemake_executor_plugin_slurm  # noqa: F401  (a test extra: the profile needs it)
     args = ["-n", "--workflow-profile", SLURM_PROFILE]
     if device:
         args += ["--config", f"device={device}"]
