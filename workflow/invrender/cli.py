@@ -9,6 +9,7 @@ import logging
 import signal
 import sys
 import threading
+from dataclasses import fields
 from pathlib import Path
 
 
@@ -45,8 +46,11 @@ def cmd_features(args):
     from .render.features import AnalysisSettings
     from .render.stage import write_features
 
-    settings = AnalysisSettings(**_load_config(args.config).get("analysis", {}))
-    write_features(args.scene, args.out, settings, _key_values(args.set))
+    analysis = _load_config(args.config).get("analysis", {})
+    for field in fields(AnalysisSettings):  # flags win over the YAML
+        if getattr(args, field.name) is not None:
+            analysis[field.name] = getattr(args, field.name)
+    write_features(args.scene, args.out, AnalysisSettings(**analysis), _key_values(args.set), device=args.device)
 
 
 def cmd_render(args):
@@ -94,8 +98,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = stages.add_parser("features", help="decide which effects a scene calls for -> features.json")
     p.add_argument("scene", help="scene directory (scene.json)")
     p.add_argument("--out", required=True)
-    p.add_argument("--config", help="YAML with an `analysis:` block (bounce_fraction, ...)")
+    p.add_argument("--config", help="YAML with an `analysis:` block (the flags below win over it)")
+    p.add_argument("--bounce-fraction", type=float, help="power allowed beyond the last bounce (default 0.01)")
+    p.add_argument("--specular-threshold", type=float, help="ks at or below which the lobe is compiled out")
+    p.add_argument("--max-bounces", type=int, help="upper limit of the bounce count (default 10)")
+    p.add_argument("--min-bounces", type=int, help="lower limit of the bounce count (default 1)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a feature, e.g. specular=false")
+    p.add_argument("--device", help="OpenCL device for the escape probe (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_features)
 
     p = stages.add_parser("render", help="render a scene's views (EXR + PNG preview + AOVs)")

@@ -217,10 +217,12 @@ def synthesize_config(wildcards):
     return json.dumps(SCENES[wildcards.scene]["synthetic"]["config"], sort_keys=True)
 
 
-def analysis_config(wildcards):
-    """features' --config document: the `analysis:` block, as one line of JSON."""
+def analysis_options(wildcards):
+    """features' analysis settings as flags (--bounce-fraction 0.01 ...)."""
     keys = ("bounce_fraction", "specular_threshold", "max_bounces", "min_bounces")
-    return json.dumps({"analysis": {key: config["features"][key] for key in keys}})
+    return " ".join(
+        f"--{key.replace('_', '-')} {config['features'][key]}" for key in keys
+    )
 
 
 def feature_overrides(wildcards):
@@ -248,12 +250,6 @@ def geometry_options(wildcards):
 def device_option(wildcards):
     device = config["device"]
     return f"--device {shlex.quote(device)}" if device else ""
-
-
-def device_env(wildcards):
-    """For stages without --device: the same choice through INVRENDER_DEVICE."""
-    device = config["device"]
-    return f"INVRENDER_DEVICE={shlex.quote(device)}" if device else ""
 
 
 # ---------------------------------------------------------------------------- resources

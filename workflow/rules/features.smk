@@ -23,9 +23,9 @@ rule features:
         gpu=gpu_request,
     params:
         scene=scene_dir,
-        analysis=analysis_config,
+        analysis=analysis_options,
         overrides=feature_overrides,
-        device=device_env,
+        device=device_option,
     shell:
-        "printf '%s\\n' {params.analysis:q} | {params.device} invrender --log {log} features"
-        " {params.scene} --out {output} --config /dev/stdin {params.overrides}"
+        "invrender --log {log} features {params.scene} --out {output} {params.analysis}"
+        " {params.overrides} {params.device}"

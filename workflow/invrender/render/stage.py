@@ -16,10 +16,11 @@ from .features import AnalysisSettings, Features, analyse_scene
 log = logging.getLogger(__name__)
 
 
-def write_features(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None):
+def write_features(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+                   device: str | None = None):
     """Analyse a scene directory and write features.json (features + the evidence behind them)."""
     scene = load_scene(scene_dir)
-    features, evidence = analyse_scene(scene, settings, overrides)
+    features, evidence = analyse_scene(scene, settings, overrides, device)
     log.info("features of %s: %s", scene_dir, features)
     document = features.to_json() | {"evidence": evidence}
     with atomic_path(Path(out_path)) as tmp:
