@@ -56,6 +56,38 @@ inline float3 bsdf_cos(const Material* m, float3 n, float3 wo, float3 wi)
     return f;
 }
 
+/* Partial derivatives of bsdf_cos per channel: d/dkd, d/dks (each channel on its own) and d/dka
+ * (one ka for the three channels). Sampling stays detached: the pdf is not differentiated. */
+inline void bsdf_cos_gradients(const Material* m, float3 n, float3 wo, float3 wi, float3* d_kd, float3* d_ks,
+                               float3* d_ka)
+{
+    *d_kd = *d_ks = *d_ka = (float3)(0.0f);
+    float ci = dot(n, wi), co = dot(n, wo);
+    if (!(ci > 0.0f) || !(co > 0.0f))
+        return;
+    *d_kd = (float3)(INV_PI * ci);
+#ifdef FEATURE_SPECULAR
+    float3 hsum = wi + wo;
+    float len2 = dot(hsum, hsum);
+    if (!(len2 > 1e-12f))
+        return;
+    float3 h = hsum * rsqrt(len2);
+    float ch = dot(n, h), hi = dot(wi, h);
+    if (!(ch > 0.0f) || !(hi > 0.0f))
+        return;
+    float tan2 = tan2_between(n, h, ch);
+    float D = beckmann_d(ch, tan2, m->ka);
+    float G = fmin(1.0f, fmin(2.0f * ch * co / hi, 2.0f * ch * ci / hi));
+    float mm = clamp(1.0f - hi, 0.0f, 1.0f), m5 = mm * mm * mm * mm * mm;
+    /* F = ks + (min(1, 50 ks) - ks) m5 */
+    float3 dF = (float3)(1.0f - m5) + select((float3)(0.0f), (float3)(50.0f * m5), 50.0f * m->ks < (float3)(1.0f));
+    float common = G / (4.0f * co);
+    *d_ks = dF * (D * common);
+    /* D = exp(-t / ka) / (pi ka c^4): dD/dka = D (t - ka) / ka^2 */
+    *d_ka = schlick_fresnel(m->ks, hi) * (D * (tan2 - m->ka) / (m->ka * m->ka) * common);
+#endif
+}
+
 /* Strategy 1: cosine-weighted hemisphere (Malley's method: a uniform disk point, polar mapping,
  * lifted to the hemisphere), the same mapping as the reference so samples compare one to one. */
 inline float3 sample_cosine(float3 n, float u1, float u2)

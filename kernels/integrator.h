@@ -27,16 +27,39 @@ inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
     return sp;
 }
 
+/* What the adjoint (adjoint.cl) needs of each vertex of a path, recorded by trace_path when it
+ * is given somewhere to put it: the path is at most MAX_BOUNCES + 2 vertices long (the last may
+ * be an escape), so it is stored whole instead of replayed. */
+typedef struct {
+    int texel;       /* atlas texel hit; -1: the ray escaped and saw kg along d */
+    float3 beta;     /* path throughput arriving at the vertex */
+    float3 d;        /* direction the ray travelled to reach it */
+    float3 n, wi;    /* shading normal (facing -d) and the direction sampled from here */
+    float inv_pdf;   /* 1 / p_mix(wi); 0 when the path ended here */
+} PathVertex;
+
+#define PATH_CAPACITY (MAX_BOUNCES + 2)
+
 /* *suspect is set when a path ends on a density or weight that is not a positive finite number
- * for a direction its strategy did draw: never on a correct scene, so the host counts it. */
+ * for a direction its strategy did draw: never on a correct scene, so the host counts it.
+ * With path != 0 the vertices are recorded and *length says how many. */
 inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uint ray_id, uint sample,
-                         int* suspect)
+                         int* suspect, PathVertex* path, int* length)
 {
     float3 radiance = (float3)(0.0f), beta = (float3)(1.0f);
     int skip = -1;
+    if (path)
+        *length = 0;
     for (int bounce = 0;; ++bounce) {
         Ray ray = make_ray(o, d);
         Hit hit = bvh_closest_hit(s, &ray, RAY_TMAX, skip);
+        PathVertex* vertex = path ? path + (*length)++ : 0;
+        if (vertex) {
+            vertex->texel = -1;
+            vertex->beta = beta;
+            vertex->d = d;
+            vertex->inv_pdf = 0.0f;
+        }
         if (hit.slot < 0) {
 #ifdef FEATURE_ENVIRONMENT
             radiance += beta * environment(s, d);
@@ -45,6 +68,10 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         }
         SurfacePoint sp = surface_point(s, &hit, d);
         Material m = material_at(s, sp.texel);
+        if (vertex) {
+            vertex->texel = sp.texel;
+            vertex->n = sp.n;
+        }
         radiance += beta * emitted(s, &m, d);
         if (bounce == MAX_BOUNCES)
             break;
@@ -67,6 +94,10 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         if (!all_finite3(beta)) {
             *suspect = 1;
             break;
+        }
+        if (vertex) {
+            vertex->wi = wi;
+            vertex->inv_pdf = 1.0f / pdf;
         }
         if (!(max3(beta) > 0.0f))
             break;

@@ -34,7 +34,7 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
         float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
         float3 d = camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
         int suspect = 0;
-        float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect);
+        float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect, 0, 0);
         suspects += (float)suspect;
         if (!all_finite3(L)) {
             dropped += 1.0f;

@@ -1,0 +1,108 @@
+#line 2 "adjoint.cl"
+/* The adjoint of render.cl: for each ray request and its adjoint radiance dLoss/dL (already
+ * divided by the sample count), d Loss / d(texel) of every parameter map, accumulated over all
+ * samples. Each sample's path is traced exactly as the forward kernel traces it (same random
+ * numbers) and recorded whole (at most MAX_BOUNCES + 2 vertices), then walked backwards:
+ * R, the radiance leaving the vertex after the current one, gives the derivative through the
+ * current vertex's BSDF, dL/dtheta = beta * (d f cos / d theta) / p * R. Sampling is detached
+ * (MILO sec. 3.2): p is a constant, which keeps the gradient unbiased for the expected image.
+ *
+ * Accumulation is deterministic: 64-bit fixed-point integers (value x scale, rounded) added with
+ * atom_add, which is order independent, so the same seed gives the same bytes on one device. */
+#include "common.h"
+#include "rng.h"
+#include "intersect.h"
+#include "bvh.h"
+#include "camera.h"
+#include "textures.h"
+#include "bsdf.h"
+#include "lights.h"
+#include "sampling.h"
+#include "integrator.h"
+
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+
+/* Channels of the atlas gradient per texel: kd rgb, ks rgb, ka, ke rgb, kw. */
+#define GRAD_KD 0
+#define GRAD_KS 3
+#define GRAD_KA 6
+#define GRAD_KE 7
+#define GRAD_KW 10
+#define GRAD_CHANNELS 11
+
+inline void add_fixed(global long* target, float value, float scale)
+{
+    if (value != 0.0f && isfinite(value))
+        atom_add(target, (long)rint((double)value * (double)scale));
+}
+
+inline void add_fixed3(global long* target, float3 value, float scale)
+{
+    add_fixed(target, value.x, scale);
+    add_fixed(target + 1, value.y, scale);
+    add_fixed(target + 2, value.z, scale);
+}
+
+inline void backpropagate_path(const SceneData* s, const PathVertex* path, int length, float3 adjoint,
+                               global long* grad_atlas, global long* grad_kg, float scale)
+{
+    float3 R = (float3)(0.0f); /* radiance leaving the vertex after the current one */
+    for (int b = length - 1; b >= 0; --b) {
+        PathVertex v = path[b];
+        float3 weight = adjoint * v.beta;
+        if (v.texel < 0) {
+#ifdef FEATURE_ENVIRONMENT
+            add_fixed3(grad_kg + 3 * cube_texel_of(s, v.d), weight, scale);
+            R = environment(s, v.d);
+#endif
+            continue;
+        }
+        Material m = material_at(s, v.texel);
+        global long* g = grad_atlas + GRAD_CHANNELS * v.texel;
+#ifdef FEATURE_EMISSION
+        add_fixed3(g + GRAD_KE, weight, scale);
+#endif
+#ifdef FEATURE_WINDOW
+        float3 sky = environment(s, v.d);
+        add_fixed(g + GRAD_KW, dot(weight, sky), scale);
+        add_fixed3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, scale);
+#endif
+        float3 E = emitted(s, &m, v.d);
+        if (v.inv_pdf > 0.0f) {
+            float3 wo = -v.d, d_kd, d_ks, d_ka;
+            float3 through = weight * R * v.inv_pdf;
+            bsdf_cos_gradients(&m, v.n, wo, v.wi, &d_kd, &d_ks, &d_ka);
+            add_fixed3(g + GRAD_KD, through * d_kd, scale);
+#ifdef FEATURE_SPECULAR
+            add_fixed3(g + GRAD_KS, through * d_ks, scale);
+            add_fixed(g + GRAD_KA, dot(through, d_ka), scale);
+#endif
+            R = E + bsdf_cos(&m, v.n, wo, v.wi) * v.inv_pdf * R;
+        } else {
+            R = E;
+        }
+    }
+}
+
+kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global const int4* requests,
+                         int num_requests, ulong seed, uint sample_start, uint sample_count,
+                         global const float4* adjoint, global long* grad_atlas, global long* grad_kg,
+                         float scale)
+{
+    int i = get_global_id(0);
+    if (i >= num_requests)
+        return;
+    SCENE_INIT(s);
+    int4 q = requests[i];
+    global const CameraData* cam = cameras + q.x;
+    float3 delta = adjoint[i].xyz;
+    PathVertex path[PATH_CAPACITY];
+    for (uint k = sample_start; k < sample_start + sample_count; ++k) {
+        float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
+        float3 d = camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
+        int suspect = 0, length = 0;
+        float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect, path, &length);
+        if (all_finite3(L))
+            backpropagate_path(&s, path, length, delta, grad_atlas, grad_kg, scale);
+    }
+}
