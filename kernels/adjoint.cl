@@ -98,8 +98,7 @@ kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global 
     float3 delta = adjoint[i].xyz;
     PathVertex path[PATH_CAPACITY];
     for (uint k = sample_start; k < sample_start + sample_count; ++k) {
-        float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
-        float3 d = camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
+        float3 d = camera_sample_direction(cam, q, seed, k);
         int suspect = 0, length = 0;
         float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect, path, &length);
         if (all_finite3(L))

@@ -27,6 +27,14 @@ inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
     return sp;
 }
 
+/* The camera ray of sample k of request q = (camera, x, y, ray id): jittered in its pixel with
+ * block 1 of bounce 0, so every kernel that traces this sample traces the same ray. */
+inline float3 camera_sample_direction(global const CameraData* cam, int4 q, ulong seed, uint k)
+{
+    float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
+    return camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
+}
+
 /* What the adjoint (adjoint.cl) needs of each vertex of a path, recorded by trace_path when it
  * is given somewhere to put it: the path is at most MAX_BOUNCES + 2 vertices long (the last may
  * be an escape), so it is stored whole instead of replayed. */

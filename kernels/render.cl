@@ -31,8 +31,7 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
     float3 sum = (float3)(0.0f), sum_sq = (float3)(0.0f);
     float dropped = 0.0f, suspects = 0.0f;
     for (uint k = sample_start; k < sample_start + sample_count; ++k) {
-        float4 jitter = rng_uniform4(seed, (uint)q.w, k, 0u, RNG_BLOCK_CAMERA);
-        float3 d = camera_direction(cam, (float)q.y + jitter.x, (float)q.z + jitter.y);
+        float3 d = camera_sample_direction(cam, q, seed, k);
         int suspect = 0;
         float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect, 0, 0);
         suspects += (float)suspect;
