@@ -37,12 +37,20 @@ class Renderer:
 
             features = analyse(scene)
         self.scene, self.features = scene, features
+        self.w_env, self.w_emit = w_env, w_emit
         self.context, self.queue = context_and_queue(device)
         self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
         self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(w_env, w_emit))
         program = build_program(self.context, "render.cl", features.defines())
         self.render_kernel = cl.Kernel(program, "render_rays")
         self.aov_kernel = cl.Kernel(program, "primary_aovs")
+
+    def set_maps(self, maps) -> None:
+        """New parameter maps for the same mesh (an optimiser's step): the BVH is kept, the
+        material, sky and both sampling distributions are packed and uploaded again."""
+        self.scene.maps = maps
+        self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh)
+        self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(self.w_env, self.w_emit))
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
