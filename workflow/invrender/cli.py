@@ -74,6 +74,13 @@ def cmd_geometry(args):
                  threads=args.threads)
 
 
+def cmd_gradients(args):
+    from .render.gradients_stage import write_gradients
+
+    write_gradients(args.geometry, args.capture, args.out, batch=args.batch, spp=args.spp, seed=args.seed,
+                    iteration=args.iteration, device=args.device)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -133,6 +140,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poisson-depth", type=int, default=8, help="screened Poisson octree depth (point clouds)")
     p.add_argument("--threads", type=int, help="Poisson threads (default: the CPUs this process may use)")
     p.set_defaults(func=cmd_geometry)
+
+    p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
+    p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
+    p.add_argument("--capture", required=True, help="capture directory (images/, sparse/ or transforms.json)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--batch", type=int, default=65536, help="rays drawn from all pixels of all images (MILO: 65,536)")
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--iteration", type=int, default=0, help="which batch of the seed's sequence")
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_gradients)
 
     p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
     p.add_argument("what", choices=["render"])

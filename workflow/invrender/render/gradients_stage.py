@@ -1,0 +1,89 @@
+"""The `gradients` stage: d(image loss)/d(map) for every parameter map, as EXR + PNG previews.
+
+By default the scene is the state an optimiser starts from: the captured geometry (mesh.ply with
+its atlas UVs) with uniform maps, seen by the capture's cameras. The loss is MILO's Eq. 5,
+sum_j || L_j - target_j ||_2 over a batch of rays drawn from all pixels of all images.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..scene.atomic import atomic_dir
+from ..scene.cameras import read_cameras
+from ..scene.images import read_image, write_exr, write_png_preview
+from ..scene.mesh_io import read_mesh
+from ..scene.types import Maps, Scene, SceneError
+from .adjoint import backward
+from .batches import ray_batch
+from .features import Features
+from .renderer import Renderer
+from .torch_ops import MAP_ORDER
+
+log = logging.getLogger(__name__)
+# A neutral start in which every map receives a gradient: some light everywhere (ke, and kg
+# through kw), so the albedos see light too.
+INITIAL = {"kd": 0.5, "ks": 0.04, "ka": 0.1, "ke": 0.1, "kw": 0.1, "kg": 1.0}
+
+
+def initial_scene(geometry_dir, capture_dir, cube: int = 16, initial: dict = INITIAL) -> Scene:
+    """The captured geometry with uniform maps at its atlas resolution, and the capture's cameras."""
+    geometry_dir, capture_dir = Path(geometry_dir), Path(capture_dir)
+    mesh = read_mesh(geometry_dir / "mesh.ply")
+    with np.load(geometry_dir / "atlas.npz") as atlas:
+        size = atlas["mask"].shape
+    cameras = read_cameras(capture_dir / "sparse" if (capture_dir / "sparse").exists() else capture_dir)
+    return Scene(mesh, Maps.uniform(size=size, cube=cube, **initial), cameras)
+
+
+def targets_for(capture_dir, cameras, requests) -> np.ndarray:
+    """The captured radiance of each requested pixel (images/<camera name>, linear RGB)."""
+    images = []
+    for camera in cameras:
+        path = Path(capture_dir) / "images" / camera.name
+        if not path.exists():
+            raise SceneError(path, f"image of camera {camera.name}", "an image for every camera of the model")
+        image = read_image(path)
+        if image.shape[:2] != (camera.height, camera.width):
+            raise SceneError(path, "size", f"{camera.width} x {camera.height} as its camera says, got "
+                                           f"{image.shape[1]} x {image.shape[0]}")
+        images.append(image[..., :3] if image.shape[2] >= 3 else np.repeat(image, 3, axis=2))
+    return np.stack([images[c][y, x] for c, x, y, _ in requests]).astype(np.float32)
+
+
+def signed_preview(gradient: np.ndarray) -> np.ndarray:
+    """Red for positive, blue for negative d loss / d map (summed over RGB), scaled by the 99th
+    percentile of |g|: where raising the map would raise the loss, and where it would lower it."""
+    g = gradient if gradient.ndim == 2 else gradient.sum(axis=-1)
+    scale = np.percentile(np.abs(g), 99) or 1.0
+    g = np.clip(g / scale, -1, 1)
+    return np.stack([np.maximum(g, 0), np.zeros_like(g), np.maximum(-g, 0)], -1)
+
+
+def write_gradients(geometry_dir, capture_dir, out_dir, batch: int = 65536, spp: int = 16, seed: int = 0,
+                    iteration: int = 0, device: str | None = None) -> dict:
+    scene = initial_scene(geometry_dir, capture_dir)
+    total = sum(c.width * c.height for c in scene.cameras)
+    requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
+    target = targets_for(capture_dir, scene.cameras, requests)
+    renderer = Renderer(scene, Features.everything(), device=device)
+    radiance, _, _ = renderer.render_requests(scene.cameras, requests, spp, seed)
+    residual = radiance.astype(np.float64) - target
+    norm = np.linalg.norm(residual, axis=1, keepdims=True)
+    adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
+    grads = backward(renderer, scene.cameras, requests, adjoint, spp, seed ^ (1 << 63))
+    report = {"loss": float(norm.sum()), "rays": len(requests), "spp": spp, "seed": seed, "iteration": iteration,
+              "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}
+    log.info("loss %.6g over %d rays; gradient norms %s", report["loss"], len(requests), report["norms"])
+    with atomic_dir(Path(out_dir)) as tmp:
+        tmp = Path(tmp)
+        for name in MAP_ORDER:
+            g = grads[name] if name != "kg" else grads[name].reshape(-1, grads[name].shape[2], 3)
+            write_exr(tmp / f"{name}.exr", g)
+            write_png_preview(tmp / f"{name}.png", signed_preview(g), exposure=1.0)
+        (tmp / "gradients.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
