@@ -16,6 +16,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/synthesize.smk"
 include: "workflow/rules/cameras.smk"
 include: "workflow/rules/geometry.smk"
+include: "workflow/rules/gradients.smk"
 include: "workflow/rules/features.smk"
 include: "workflow/rules/render.smk"
 

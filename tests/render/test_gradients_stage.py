@@ -27,8 +27,8 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
     write_exr(capture / "images" / "view.exr", image)
 
     out = tmp_path / "gradients"
-    assert main(["gradients", "--geometry", str(geometry), "--capture", str(capture), "--out", str(out),
-                 "--spp", "16"]) == 0
+    assert main(["gradients", "--geometry", str(geometry), "--cameras", str(capture / "sparse"),
+                 "--images", str(capture / "images"), "--out", str(out), "--spp", "16"]) == 0
     report = json.loads((out / "gradients.json").read_text())
     assert report["rays"] == len(pixel_requests(truth.cameras[0]))
     assert all(np.isfinite(v) and v > 0 for v in report["norms"].values()), report["norms"]

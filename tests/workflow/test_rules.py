@@ -147,6 +147,23 @@ def test_features_analyses_the_scene(built, test_config):
     assert settings["bounce_fraction"] == 0.01 and settings["max_bounces"] == 10
 
 
+def test_gradients_writes_every_map(built, test_config):
+    workdir, config = built
+    snakemake(workdir, "--cores", "2", "results/room/geometry", "results/room/cameras", config=config)
+    result = snakemake(workdir, "--cores", "2", "results/room/gradients", config=config)
+    assert job_counts(result.stdout) == {"gradients": 1}
+    gradients = workdir / "results/room/gradients"
+    report = read_json(gradients / "gradients.json")
+    assert report["rays"] == test_config["gradients"]["batch"] and report["loss"] > 0
+    atlas = test_config["geometry"]["atlas_resolution"]
+    for name in ("kd", "ks", "ka", "ke", "kw", "kg"):
+        values = read_image(gradients / f"{name}.exr")
+        assert np.isfinite(values).all() and np.abs(values).sum() > 0, name
+        if name != "kg":
+            assert values.shape[:2] == (atlas, atlas), (name, values.shape)
+        assert (gradients / f"{name}.png").is_file()
+
+
 def test_render_writes_every_view(built):
     workdir, _ = built
     snakemake(workdir, "--cores", "2", "results/room/features.json")  # upstream, if not built here yet

@@ -16,7 +16,7 @@ import yaml
 from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
 
 RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry",
-                  "features.json": "features", "renders": "render"}
+                  "gradients": "gradients", "features.json": "features", "renders": "render"}
 OUTPUTS = tuple(RULE_OF_OUTPUT)
 
 
@@ -26,7 +26,7 @@ def complete(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("complete")
     result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "features": 2, "render": 2, "all": 1,
+        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "all": 1,
     }
     return workdir
 
@@ -41,13 +41,13 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
     override = tmp_path / "faces.yaml"
     override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    # Nothing downstream of geometry reads it yet (features and render read the synthetic
-    # scene until the bake stage lands): geometry and the final target only.
-    assert job_counts(result.stdout) == {"geometry": 2, "all": 1}
+    # Downstream of geometry only gradients reads it so far (features and render read the
+    # synthetic scene until the bake stage lands): nothing upstream runs again.
+    assert job_counts(result.stdout) == {"geometry": 2, "gradients": 2, "all": 1}
     assert "Params have changed since last execution" in result.stdout
     # The same through --config, as one would type it.
     result = snakemake(complete, "-n", "--config", "geometry={target_faces: 1000}")
-    assert job_counts(result.stdout) == {"geometry": 2, "all": 1}
+    assert job_counts(result.stdout) == {"geometry": 2, "gradients": 2, "all": 1}
 
 
 def test_changing_render_spp_reruns_render_only(complete, tmp_path):

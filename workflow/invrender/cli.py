@@ -77,8 +77,8 @@ def cmd_geometry(args):
 def cmd_gradients(args):
     from .render.gradients_stage import write_gradients
 
-    write_gradients(args.geometry, args.capture, args.out, batch=args.batch, spp=args.spp, seed=args.seed,
-                    iteration=args.iteration, device=args.device)
+    write_gradients(args.geometry, args.cameras, args.images, args.out, batch=args.batch, spp=args.spp,
+                    seed=args.seed, iteration=args.iteration, device=args.device)
 
 
 def cmd_bench(args):
@@ -143,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
-    p.add_argument("--capture", required=True, help="capture directory (images/, sparse/ or transforms.json)")
+    p.add_argument("--cameras", required=True, help="COLMAP model directory or transforms.json")
+    p.add_argument("--images", required=True, help="directory of the captured images, named as the cameras' images")
     p.add_argument("--out", required=True)
     p.add_argument("--batch", type=int, default=65536, help="rays drawn from all pixels of all images (MILO: 65,536)")
     p.add_argument("--spp", type=int, default=16)

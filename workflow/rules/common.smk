@@ -145,7 +145,11 @@ for _name in CAPTURES:
 
 def scene_targets(scene):
     """Every artifact the workflow makes for one scene (what `rule all` asks for)."""
-    targets = [f"results/{scene}/cameras", f"results/{scene}/geometry"]
+    targets = [
+        f"results/{scene}/cameras",
+        f"results/{scene}/geometry",
+        f"results/{scene}/gradients",
+    ]
     if is_synthetic(scene):
         targets += [
             f"results/{scene}/capture",

@@ -30,21 +30,21 @@ log = logging.getLogger(__name__)
 INITIAL = {"kd": 0.5, "ks": 0.04, "ka": 0.1, "ke": 0.1, "kw": 0.1, "kg": 1.0}
 
 
-def initial_scene(geometry_dir, capture_dir, cube: int = 16, initial: dict = INITIAL) -> Scene:
-    """The captured geometry with uniform maps at its atlas resolution, and the capture's cameras."""
-    geometry_dir, capture_dir = Path(geometry_dir), Path(capture_dir)
+def initial_scene(geometry_dir, cameras_path, cube: int = 16, initial: dict = INITIAL) -> Scene:
+    """The captured geometry with uniform maps at its atlas resolution, seen by the cameras (a
+    COLMAP model or transforms.json)."""
+    geometry_dir = Path(geometry_dir)
     mesh = read_mesh(geometry_dir / "mesh.ply")
     with np.load(geometry_dir / "atlas.npz") as atlas:
         size = atlas["mask"].shape
-    cameras = read_cameras(capture_dir / "sparse" if (capture_dir / "sparse").exists() else capture_dir)
-    return Scene(mesh, Maps.uniform(size=size, cube=cube, **initial), cameras)
+    return Scene(mesh, Maps.uniform(size=size, cube=cube, **initial), read_cameras(cameras_path))
 
 
-def targets_for(capture_dir, cameras, requests) -> np.ndarray:
-    """The captured radiance of each requested pixel (images/<camera name>, linear RGB)."""
+def targets_for(images_dir, cameras, requests) -> np.ndarray:
+    """The captured radiance of each requested pixel (images_dir/<camera name>, linear RGB)."""
     images = []
     for camera in cameras:
-        path = Path(capture_dir) / "images" / camera.name
+        path = Path(images_dir) / camera.name
         if not path.exists():
             raise SceneError(path, f"image of camera {camera.name}", "an image for every camera of the model")
         image = read_image(path)
@@ -64,12 +64,12 @@ def signed_preview(gradient: np.ndarray) -> np.ndarray:
     return np.stack([np.maximum(g, 0), np.zeros_like(g), np.maximum(-g, 0)], -1)
 
 
-def write_gradients(geometry_dir, capture_dir, out_dir, batch: int = 65536, spp: int = 16, seed: int = 0,
-                    iteration: int = 0, device: str | None = None) -> dict:
-    scene = initial_scene(geometry_dir, capture_dir)
+def write_gradients(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
+                    seed: int = 0, iteration: int = 0, device: str | None = None) -> dict:
+    scene = initial_scene(geometry_dir, cameras_path)
     total = sum(c.width * c.height for c in scene.cameras)
     requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
-    target = targets_for(capture_dir, scene.cameras, requests)
+    target = targets_for(images_dir, scene.cameras, requests)
     renderer = Renderer(scene, Features.everything(), device=device)
     radiance, _, _ = renderer.render_requests(scene.cameras, requests, spp, seed)
     residual = radiance.astype(np.float64) - target
