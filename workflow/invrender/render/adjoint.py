@@ -13,8 +13,7 @@ import pyopencl as cl
 
 from ..scene.types import Camera
 from .program import build_program
-from .renderer import LOCAL_SIZE, SAMPLES_PER_LAUNCH, Renderer
-from .scene_buffers import pack_cameras
+from .renderer import Renderer
 
 GRAD_CHANNELS = {"kd": slice(0, 3), "ks": slice(3, 6), "ka": slice(6, 7), "ke": slice(7, 10), "kw": slice(10, 11)}
 FIXED_POINT_SCALE = float(2**32)  # resolution 2.3e-10 per addition, range +-2.1e9 per texel
@@ -23,27 +22,19 @@ FIXED_POINT_SCALE = float(2**32)  # resolution 2.3e-10 per addition, range +-2.1
 def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, adjoint: np.ndarray, spp: int,
              seed: int = 0, scale: float = FIXED_POINT_SCALE) -> dict[str, np.ndarray]:
     context, queue = renderer.context, renderer.queue
-    program = build_program(context, "adjoint.cl", renderer.features.defines())
-    kernel = cl.Kernel(program, "adjoint_rays")
+    kernel = cl.Kernel(build_program(context, "adjoint.cl", renderer.features.defines()), "adjoint_rays")
     host = renderer.host
     n = len(requests)
-    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-    cams = cl.Buffer(context, flags, hostbuf=pack_cameras(cameras))
-    reqs = cl.Buffer(context, flags, hostbuf=np.ascontiguousarray(requests, np.int32))
+    cams, reqs = renderer.request_buffers(cameras, requests)
     per_sample = np.zeros((n, 4), np.float32)
     per_sample[:, :3] = np.asarray(adjoint, np.float32) / spp  # each sample is 1/spp of the estimate
-    adj = cl.Buffer(context, flags, hostbuf=per_sample)
+    adj = cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=per_sample)
     grad_atlas = np.zeros(host.atlas_w * host.atlas_h * 11, np.int64)
     grad_kg = np.zeros(6 * host.cube_n * host.cube_n * 3, np.int64)
     rw = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
     atlas_buf, kg_buf = cl.Buffer(context, rw, hostbuf=grad_atlas), cl.Buffer(context, rw, hostbuf=grad_kg)
-    per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
-    for start in range(0, spp, per_launch):
-        count = min(per_launch, spp - start)
-        kernel(queue, (max(LOCAL_SIZE, -(-n // LOCAL_SIZE) * LOCAL_SIZE),), (LOCAL_SIZE,), *renderer.scene_args,
-               cams, reqs, np.int32(n), np.uint64(seed), np.uint32(start), np.uint32(count), adj, atlas_buf,
-               kg_buf, np.float32(scale))
-        queue.finish()
+    renderer.sample_launches(kernel, n, spp, seed, (cams, reqs, np.int32(n)),
+                             (adj, atlas_buf, kg_buf, np.float32(scale)), desc="adjoint")
     cl.enqueue_copy(queue, grad_atlas, atlas_buf)
     cl.enqueue_copy(queue, grad_kg, kg_buf)
     atlas = (grad_atlas / scale).reshape(host.atlas_h, host.atlas_w, 11)

@@ -63,6 +63,22 @@ class Renderer:
     def _global_size(self, n: int) -> tuple[int]:
         return (max(LOCAL_SIZE, -(-n // LOCAL_SIZE) * LOCAL_SIZE),)
 
+    def request_buffers(self, cameras: list[Camera], requests: np.ndarray) -> tuple[cl.Buffer, cl.Buffer]:
+        return self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
+
+    def sample_launches(self, kernel: cl.Kernel, n: int, spp: int, seed: int, head: tuple, tail: tuple,
+                        desc: str = "render", progress: bool = False) -> None:
+        """Run a per-request kernel over samples [0, spp) in launches of at most
+        SAMPLES_PER_LAUNCH paths: kernel(scene args, *head, seed, start, count, *tail)."""
+        per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
+        for start in tqdm(range(0, spp, per_launch), desc=desc, unit="launch", disable=not progress, leave=False):
+            count = min(per_launch, spp - start)
+            kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, *head, np.uint64(seed),
+                   np.uint32(start), np.uint32(count), *tail)
+            # One launch at a time: the progress bar tells the truth, and a signal (Ctrl-C,
+            # SIGTERM) is handled within a launch instead of after the whole queue drains.
+            self.queue.finish()
+
     def ray_offset(self, camera: Camera) -> int:
         """Ray ids continue across the scene's cameras, so no two pixels share random numbers."""
         offset = 0
@@ -80,19 +96,11 @@ class Renderer:
         a positive finite number: 0 unless something is wrong. For int4 requests
         (camera, x, y, ray id)."""
         n = len(requests)
-        cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
+        cams, reqs = self.request_buffers(cameras, requests)
         accum, accum_buf = self._zeros((n, 4))
         accum_sq, accum_sq_buf = self._zeros((n, 4))
-        per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
-        kernel = self.render_kernel
-        starts = range(0, spp, per_launch)
-        for start in tqdm(starts, desc="render", unit="launch", disable=not progress, leave=False):
-            count = min(per_launch, spp - start)
-            kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
-                   np.int32(n), np.uint64(seed), np.uint32(start), np.uint32(count), accum_buf, accum_sq_buf)
-            # One launch at a time: the progress bar tells the truth, and a signal (Ctrl-C,
-            # SIGTERM) is handled within a launch instead of after the whole queue drains.
-            self.queue.finish()
+        self.sample_launches(self.render_kernel, n, spp, seed, (cams, reqs, np.int32(n)), (accum_buf, accum_sq_buf),
+                             progress=progress)
         cl.enqueue_copy(self.queue, accum, accum_buf)
         cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
         dropped = int(accum[:, 3].sum() + accum_sq[:, 3].sum())
@@ -103,7 +111,7 @@ class Renderer:
 
     def aovs(self, cameras: list[Camera], requests: np.ndarray) -> dict[str, np.ndarray]:
         n = len(requests)
-        cams, reqs = self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
+        cams, reqs = self.request_buffers(cameras, requests)
         out = {"depth": self._zeros(n), "normal": self._zeros((n, 4)), "uv": self._zeros((n, 2)),
                "instance_id": self._zeros(n, np.int32), "triangle_id": self._zeros(n, np.int32)}
         self.aov_kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
