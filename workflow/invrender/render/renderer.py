@@ -10,7 +10,7 @@ from ..scene.types import Camera, Scene
 from .device import context_and_queue
 from .features import Features
 from .program import build_program
-from .scene_buffers import HostScene, pack_cameras
+from .scene_buffers import GEOMETRY_ARGS, SCENE_ARG_ORDER, HostScene, pack_cameras
 
 LOCAL_SIZE = 64
 SAMPLES_PER_LAUNCH = 2_000_000  # path samples per kernel launch: keeps launches short on GPUs
@@ -46,11 +46,14 @@ class Renderer:
         self.aov_kernel = cl.Kernel(program, "primary_aovs")
 
     def set_maps(self, maps) -> None:
-        """New parameter maps for the same mesh (an optimiser's step): the BVH is kept, the
-        material, sky and both sampling distributions are packed and uploaded again."""
+        """New parameter maps for the same mesh (an optimiser's step): the BVH and the geometry
+        buffers stay on the device; the material, sky and both sampling distributions are packed
+        and uploaded again."""
         self.scene.maps = maps
+        on_device = {name: self.scene_args[SCENE_ARG_ORDER.index(name)] for name in GEOMETRY_ARGS}
         self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh)
-        self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(self.w_env, self.w_emit))
+        self.scene_args = self.host.upload(self.context, reuse=on_device) + list(
+            self.host.strategy_weights(self.w_env, self.w_emit))
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:

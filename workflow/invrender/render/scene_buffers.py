@@ -187,18 +187,25 @@ class HostScene:
         so its share goes to the BSDF lobes instead of to directions it cannot draw."""
         return np.float32(0.0 if self.env_black else w_env), np.float32(w_emit if self.num_emitters > 0 else 0.0)
 
-    def upload(self, context: cl.Context) -> list:
-        """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers."""
+    def upload(self, context: cl.Context, reuse: dict | None = None) -> list:
+        """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers.
+        `reuse` maps argument names to buffers already on the device (the geometry, when only
+        the maps changed)."""
         args = []
         for name in SCENE_ARG_ORDER:
             value = getattr(self, name)
-            if isinstance(value, np.ndarray):
+            if reuse and name in reuse:
+                args.append(reuse[name])
+            elif isinstance(value, np.ndarray):
                 data = np.ascontiguousarray(value if value.size else np.zeros(4, value.dtype))
                 args.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data))
             else:
                 args.append(np.int32(value))
         return args
 
+
+# Arguments that depend on the mesh only: new maps for the same mesh leave them as they are.
+GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
 
 SCENE_ARG_ORDER = (
     "tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children", "material",
