@@ -7,8 +7,13 @@
  * current vertex's BSDF, dL/dtheta = beta * (d f cos / d theta) / p * R. Sampling is detached
  * (MILO sec. 3.2): p is a constant, which keeps the gradient unbiased for the expected image.
  *
- * Accumulation is deterministic: 64-bit fixed-point integers (value x scale, rounded) added with
- * atom_add, which is order independent, so the same seed gives the same bytes on one device. */
+ * Two accumulation modes, chosen at compile time:
+ * - default, deterministic: 64-bit fixed-point integers (value x scale, rounded) added with
+ *   atom_add, which is order independent, so the same seed gives the same bytes on one device.
+ * - ACCUMULATE_BUCKETS: MILO's scheme. NUM_BUCKETS float copies of the gradient maps; a ray adds
+ *   into copy (ray id mod NUM_BUCKETS) with a compare-and-swap float add (OpenCL 1.2 has no float
+ *   atomics), so rays that hit the same texel at once rarely touch the same word; reduce_buckets
+ *   sums the copies. The order of float additions varies from run to run. */
 #include "common.h"
 #include "rng.h"
 #include "intersect.h"
@@ -30,21 +35,38 @@
 #define GRAD_KW 10
 #define GRAD_CHANNELS 11
 
-inline void add_fixed(global long* target, float value, float scale)
+#ifdef ACCUMULATE_BUCKETS
+typedef float grad_t;
+
+/* A float atomic add by compare-and-swap on the word's bits. */
+inline void add_grad(global grad_t* target, float value, float scale)
+{
+    if (value == 0.0f || !isfinite(value))
+        return;
+    volatile global uint* word = (volatile global uint*)target;
+    uint expected = *word, seen;
+    while ((seen = atomic_cmpxchg(word, expected, as_uint(as_float(expected) + value))) != expected)
+        expected = seen;
+}
+#else
+typedef long grad_t;
+
+inline void add_grad(global grad_t* target, float value, float scale)
 {
     if (value != 0.0f && isfinite(value))
         atom_add(target, (long)rint((double)value * (double)scale));
 }
+#endif
 
-inline void add_fixed3(global long* target, float3 value, float scale)
+inline void add_grad3(global grad_t* target, float3 value, float scale)
 {
-    add_fixed(target, value.x, scale);
-    add_fixed(target + 1, value.y, scale);
-    add_fixed(target + 2, value.z, scale);
+    add_grad(target, value.x, scale);
+    add_grad(target + 1, value.y, scale);
+    add_grad(target + 2, value.z, scale);
 }
 
 inline void backpropagate_path(const SceneData* s, const PathVertex* path, int length, float3 adjoint,
-                               global long* grad_atlas, global long* grad_kg, float scale)
+                               global grad_t* grad_atlas, global grad_t* grad_kg, float scale)
 {
     float3 R = (float3)(0.0f); /* radiance leaving the vertex after the current one */
     for (int b = length - 1; b >= 0; --b) {
@@ -52,30 +74,30 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
         float3 weight = adjoint * v.beta;
         if (v.texel < 0) {
 #ifdef FEATURE_ENVIRONMENT
-            add_fixed3(grad_kg + 3 * cube_texel_of(s, v.d), weight, scale);
+            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight, scale);
             R = environment(s, v.d);
 #endif
             continue;
         }
         Material m = material_at(s, v.texel);
-        global long* g = grad_atlas + GRAD_CHANNELS * v.texel;
+        global grad_t* g = grad_atlas + GRAD_CHANNELS * v.texel;
 #ifdef FEATURE_EMISSION
-        add_fixed3(g + GRAD_KE, weight, scale);
+        add_grad3(g + GRAD_KE, weight, scale);
 #endif
 #ifdef FEATURE_WINDOW
         float3 sky = environment(s, v.d);
-        add_fixed(g + GRAD_KW, dot(weight, sky), scale);
-        add_fixed3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, scale);
+        add_grad(g + GRAD_KW, dot(weight, sky), scale);
+        add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, scale);
 #endif
         float3 E = emitted(s, &m, v.d);
         if (v.inv_pdf > 0.0f) {
             float3 wo = -v.d, d_kd, d_ks, d_ka;
             float3 through = weight * R * v.inv_pdf;
             bsdf_cos_gradients(&m, v.n, wo, v.wi, &d_kd, &d_ks, &d_ka);
-            add_fixed3(g + GRAD_KD, through * d_kd, scale);
+            add_grad3(g + GRAD_KD, through * d_kd, scale);
 #ifdef FEATURE_SPECULAR
-            add_fixed3(g + GRAD_KS, through * d_ks, scale);
-            add_fixed(g + GRAD_KA, dot(through, d_ka), scale);
+            add_grad3(g + GRAD_KS, through * d_ks, scale);
+            add_grad(g + GRAD_KA, dot(through, d_ka), scale);
 #endif
             R = E + bsdf_cos(&m, v.n, wo, v.wi) * v.inv_pdf * R;
         } else {
@@ -86,14 +108,19 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
 
 kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global const int4* requests,
                          int num_requests, ulong seed, uint sample_start, uint sample_count,
-                         global const float4* adjoint, global long* grad_atlas, global long* grad_kg,
-                         float scale)
+                         global const float4* adjoint, global grad_t* grad_atlas, global grad_t* grad_kg,
+                         float scale, int atlas_stride, int kg_stride)
 {
     int i = get_global_id(0);
     if (i >= num_requests)
         return;
     SCENE_INIT(s);
     int4 q = requests[i];
+#ifdef ACCUMULATE_BUCKETS
+    int bucket = (int)((uint)q.w % NUM_BUCKETS);
+    grad_atlas += (long)bucket * atlas_stride;
+    grad_kg += (long)bucket * kg_stride;
+#endif
     global const CameraData* cam = cameras + q.x;
     float3 delta = adjoint[i].xyz;
     PathVertex path[PATH_CAPACITY];
@@ -104,4 +131,16 @@ kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global 
         if (all_finite3(L))
             backpropagate_path(&s, path, length, delta, grad_atlas, grad_kg, scale);
     }
+}
+
+/* Sums the NUM_BUCKETS copies (each `stride` floats) into the first, in bucket order. */
+kernel void reduce_buckets(global float* buckets, int stride, int num_buckets)
+{
+    int i = get_global_id(0);
+    if (i >= stride)
+        return;
+    float sum = 0.0f;
+    for (int b = 0; b < num_buckets; ++b)
+        sum += buckets[(long)b * stride + i];
+    buckets[i] = sum;
 }
