@@ -569,3 +569,55 @@ def render_aovs(
     loaded = mi.load_dict(scene_dict, parallel=False)
     image = np.array(mi.render(loaded, spp=int(spp), seed=int(seed)), dtype=np.float32)
     return {"depth": image[..., 0], "uv": image[..., 1:3], "hit": image[..., 3]}
+
+
+# ---------------------------------------------------------------------------------------------
+# Gradients: a Lambertian scene in Mitsuba's own BSDF, for its differentiable integrators
+# ---------------------------------------------------------------------------------------------
+
+KD_PARAMETER_SUFFIX = "reflectance.data"  # mi.traverse key of diffuse_bsdf's kd bitmap
+
+
+def diffuse_bsdf(kd) -> dict:
+    """Mitsuba's two-sided `diffuse` BSDF reading kd from a bitmap (nearest texel, raw values).
+
+    It is our model with ks = 0 (docs/renderer.md: the F90 clamp makes ks = 0 exactly
+    Lambertian). Mitsuba's `prb` differentiates its native BSDFs; the milo plugin above is
+    Python, which prb would trace and differentiate too, but more slowly."""
+    return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": bitmap_texture(kd)}}
+
+
+def prb_integrator(max_bounces: int) -> dict:
+    """Mitsuba's path replay backpropagation for B bounces: max_depth = B + 1, no Russian
+    roulette (rr_depth beyond the last bounce), as our integrator."""
+    return {"type": "prb", "max_depth": int(max_bounces) + 1, "rr_depth": int(max_bounces) + 2}
+
+
+def scene_to_mitsuba_diffuse(scene: Scene, camera: Camera, max_bounces: int, spp: int,
+                             variant: str = DEFAULT_VARIANT, seed: int = 0, window_as_hole: bool = True,
+                             envmap_size=None, integrator: dict | None = None) -> dict:
+    """As `scene_to_mitsuba`, for a scene with ks = 0 everywhere, with `diffuse_bsdf(kd)` (one
+    instance shared by every mesh, so `mi.traverse` lists its kd once: `kd_parameter`) instead of
+    the milo plugin. Emitters are one-sided in Mitsuba (see above): face them into the scene."""
+    if np.any(scene.maps.ks > 0):
+        raise ValueError("scene_to_mitsuba_diffuse: maps.ks: expected 0 everywhere (a Lambertian scene), "
+                         f"got a maximum of {float(scene.maps.ks.max())}")
+    out = scene_to_mitsuba(scene, camera, max_bounces, spp, variant, seed, window_as_hole, envmap_size, integrator)
+    groups = classify_faces(scene, window_as_hole)
+    bsdf = mi.load_dict(diffuse_bsdf(scene.maps.kd))
+    kept = ~groups["hole"]
+    mesh = scene.mesh
+    for name, mask, emits in (("surfaces", kept & ~groups["emitter"], False), ("emitters", kept & groups["emitter"], True)):
+        if name in out:
+            emitter = {"type": "area", "radiance": bitmap_texture(scene.maps.ke)} if emits else None
+            out[name] = mesh_object(mesh.positions, mesh.faces[mask], mesh.uvs, name, bsdf=bsdf, emitter=emitter)
+    return out
+
+
+def kd_parameter(params) -> str:
+    """The key of the kd bitmap of `scene_to_mitsuba_diffuse` in `mi.traverse(scene)`: its data
+    is indexed as our atlas (row, column, channel), so its gradient is d/d kd texel by texel."""
+    keys = [key for key in params.keys() if key.endswith("bsdf.brdf_0." + KD_PARAMETER_SUFFIX)]
+    if len(keys) != 1:
+        raise ValueError(f"kd_parameter: expected one diffuse kd bitmap among the scene parameters, got {keys}")
+    return keys[0]
