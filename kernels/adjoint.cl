@@ -10,6 +10,10 @@
  * Two accumulation modes, chosen at compile time:
  * - default, deterministic: 64-bit fixed-point integers (value x scale, rounded) added with
  *   atom_add, which is order independent, so the same seed gives the same bytes on one device.
+ *   Each map has its own scale. Each work-item keeps the largest |value| it added per map and
+ *   the launch keeps the largest of those (`peaks`), so the host can tell when a scale left too
+ *   little headroom or too little resolution and run the pass again with better ones
+ *   (render/adjoint.py).
  * - ACCUMULATE_BUCKETS: MILO's scheme. NUM_BUCKETS float copies of the gradient maps; a ray adds
  *   into copy (ray id mod NUM_BUCKETS) with a compare-and-swap float add (OpenCL 1.2 has no float
  *   atomics), so rays that hit the same texel at once rarely touch the same word; reduce_buckets
@@ -35,11 +39,20 @@
 #define GRAD_KW 10
 #define GRAD_CHANNELS 11
 
+/* The six maps, each with its own fixed-point scale: their derivatives can lie ten orders of
+ * magnitude apart (d/dka of a mirror against d/dke), and one scale cannot resolve both. */
+enum { MAP_KD, MAP_KS, MAP_KA, MAP_KE, MAP_KW, MAP_KG, GRAD_MAPS };
+
+typedef struct {
+    float scale[GRAD_MAPS]; /* fixed point: units per 1.0, a power of two */
+    float peak[GRAD_MAPS];  /* largest |value| this work-item added */
+} Accumulator;
+
 #ifdef ACCUMULATE_BUCKETS
 typedef float grad_t;
 
 /* A float atomic add by compare-and-swap on the word's bits. */
-inline void add_grad(global grad_t* target, float value, float scale)
+inline void add_grad(global grad_t* target, float value, Accumulator* acc, int map)
 {
     if (value == 0.0f || !isfinite(value))
         return;
@@ -51,22 +64,24 @@ inline void add_grad(global grad_t* target, float value, float scale)
 #else
 typedef long grad_t;
 
-inline void add_grad(global grad_t* target, float value, float scale)
+inline void add_grad(global grad_t* target, float value, Accumulator* acc, int map)
 {
-    if (value != 0.0f && isfinite(value))
-        atom_add(target, (long)rint((double)value * (double)scale));
+    if (value != 0.0f && isfinite(value)) {
+        atom_add(target, (long)rint(value * acc->scale[map])); /* a power of two: exact */
+        acc->peak[map] = fmax(acc->peak[map], fabs(value));
+    }
 }
 #endif
 
-inline void add_grad3(global grad_t* target, float3 value, float scale)
+inline void add_grad3(global grad_t* target, float3 value, Accumulator* acc, int map)
 {
-    add_grad(target, value.x, scale);
-    add_grad(target + 1, value.y, scale);
-    add_grad(target + 2, value.z, scale);
+    add_grad(target, value.x, acc, map);
+    add_grad(target + 1, value.y, acc, map);
+    add_grad(target + 2, value.z, acc, map);
 }
 
 inline void backpropagate_path(const SceneData* s, const PathVertex* path, int length, float3 adjoint,
-                               global grad_t* grad_atlas, global grad_t* grad_kg, float scale)
+                               global grad_t* grad_atlas, global grad_t* grad_kg, Accumulator* acc)
 {
     float3 R = (float3)(0.0f); /* radiance leaving the vertex after the current one */
     for (int b = length - 1; b >= 0; --b) {
@@ -74,7 +89,7 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
         float3 weight = adjoint * v.beta;
         if (v.texel < 0) {
 #ifdef FEATURE_ENVIRONMENT
-            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight, scale);
+            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight, acc, MAP_KG);
             R = environment(s, v.d);
 #endif
             continue;
@@ -82,22 +97,22 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
         Material m = material_at(s, v.texel);
         global grad_t* g = grad_atlas + GRAD_CHANNELS * v.texel;
 #ifdef FEATURE_EMISSION
-        add_grad3(g + GRAD_KE, weight, scale);
+        add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
 #endif
 #ifdef FEATURE_WINDOW
         float3 sky = environment(s, v.d);
-        add_grad(g + GRAD_KW, dot(weight, sky), scale);
-        add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, scale);
+        add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
+        add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
 #endif
         float3 E = emitted(s, &m, v.d);
         if (v.inv_pdf > 0.0f) {
             float3 wo = -v.d, d_kd, d_ks, d_ka;
             float3 through = weight * R * v.inv_pdf;
             bsdf_cos_gradients(&m, v.n, wo, v.wi, &d_kd, &d_ks, &d_ka);
-            add_grad3(g + GRAD_KD, through * d_kd, scale);
+            add_grad3(g + GRAD_KD, through * d_kd, acc, MAP_KD);
 #ifdef FEATURE_SPECULAR
-            add_grad3(g + GRAD_KS, through * d_ks, scale);
-            add_grad(g + GRAD_KA, dot(through, d_ka), scale);
+            add_grad3(g + GRAD_KS, through * d_ks, acc, MAP_KS);
+            add_grad(g + GRAD_KA, dot(through, d_ka), acc, MAP_KA);
 #endif
             R = E + bsdf_cos(&m, v.n, wo, v.wi) * v.inv_pdf * R;
         } else {
@@ -109,7 +124,7 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
 kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global const int4* requests,
                          int num_requests, ulong seed, uint sample_start, uint sample_count,
                          global const float4* adjoint, global grad_t* grad_atlas, global grad_t* grad_kg,
-                         float scale, int atlas_stride, int kg_stride)
+                         int atlas_stride, int kg_stride, global const float* scales, volatile global int* peaks)
 {
     int i = get_global_id(0);
     if (i >= num_requests)
@@ -121,6 +136,11 @@ kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global 
     grad_atlas += (long)bucket * atlas_stride;
     grad_kg += (long)bucket * kg_stride;
 #endif
+    Accumulator acc;
+    for (int map = 0; map < GRAD_MAPS; ++map) {
+        acc.scale[map] = scales[map];
+        acc.peak[map] = 0.0f;
+    }
     global const CameraData* cam = cameras + q.x;
     float3 delta = adjoint[i].xyz;
     PathVertex path[PATH_CAPACITY];
@@ -129,8 +149,11 @@ kernel void adjoint_rays(SCENE_PARAMS, global const CameraData* cameras, global 
         int suspect = 0, length = 0;
         float3 L = trace_path(&s, camera_center(cam), d, seed, (uint)q.w, k, &suspect, path, &length);
         if (all_finite3(L))
-            backpropagate_path(&s, path, length, delta, grad_atlas, grad_kg, scale);
+            backpropagate_path(&s, path, length, delta, grad_atlas, grad_kg, &acc);
     }
+    for (int map = 0; map < GRAD_MAPS; ++map)
+        if (acc.peak[map] > 0.0f)
+            atomic_max(peaks + map, as_int(acc.peak[map])); /* non-negative floats order as their bits */
 }
 
 /* Sums the NUM_BUCKETS copies (each `stride` floats) into the first, in bucket order. */

@@ -80,7 +80,20 @@ typedef struct {
     global const float8* em_bounds;
     global const int8* em_children;
     float w_env, w_emit;               /* mixture weights of strategies 3 and 4 */
-} SceneData;
+    global const float4* proposal;     /* the material paths are sampled from: `material`, */
+} SceneData;                           /* or another under FIXED_PROPOSAL (below) */
+
+/* FIXED_PROPOSAL, a test hook: paths are sampled with the densities of a second material
+ * buffer and evaluated with `material`. Importance sampling with a proposal that stays put as
+ * the material moves gives an estimator whose finite differences in a BSDF parameter are as
+ * smooth as the adjoint's, path for path (tests/render/test_gradients_fd.py). */
+#ifdef FIXED_PROPOSAL
+#define PROPOSAL_PARAM , global const float4 *proposal_material
+#define PROPOSAL_BUFFER proposal_material
+#else
+#define PROPOSAL_PARAM
+#define PROPOSAL_BUFFER material
+#endif
 
 #define SCENE_PARAMS                                                                         \
     global const float4 *tri_v, global const float2 *tri_uv, global const int *tri_id,      \
@@ -89,12 +102,12 @@ typedef struct {
         int atlas_h, global const float4 *kg, int cube_n, global const float *env_cdf,      \
         global const float *env_pmf, global const float4 *em_v, global const float *em_cdf, \
         global const float *em_pdf_area, int num_emitters, global const float8 *em_bounds,  \
-        global const int8 *em_children, float w_env, float w_emit
+        global const int8 *em_children, float w_env, float w_emit PROPOSAL_PARAM
 
 #define SCENE_INIT(s)                                                                        \
     SceneData s = {tri_v,   tri_uv,  tri_id,   tri_instance, bvh_bounds, bvh_children,      \
                    material, atlas_w, atlas_h, kg,           cube_n,     env_cdf,           \
                    env_pmf, em_v,    em_cdf,   em_pdf_area,  num_emitters, em_bounds,       \
-                   em_children, w_env, w_emit}
+                   em_children, w_env, w_emit, PROPOSAL_BUFFER}
 
 #endif

@@ -83,16 +83,17 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         radiance += beta * emitted(s, &m, d);
         if (bounce == MAX_BOUNCES)
             break;
-        MixtureWeights w = mixture_weights(s, &m);
+        Material q = proposal_at(s, sp.texel, &m);
+        MixtureWeights w = mixture_weights(s, &q);
         if (!reflects(&w))
             break;
         float3 wo = -d;
         float4 u = rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_SCATTER);
-        float3 wi = sample_mixture(s, &w, &m, sp.p, sp.n, wo, u);
+        float3 wi = sample_mixture(s, &w, &q, sp.p, sp.n, wo, u);
         if (!(dot(wi, sp.n) > 0.0f))
             break; /* spent sample, or below the surface where f = 0 */
         float3 x = offset_ray_origin(sp.p, sp.n);
-        float pdf = pdf_mixture(s, &w, &m, x, sp.n, wo, wi);
+        float pdf = pdf_mixture(s, &w, &q, x, sp.n, wo, wi);
         float3 f = bsdf_cos(&m, sp.n, wo, wi);
         if (!(pdf > 0.0f) || !isfinite(pdf)) {
             *suspect = 1;

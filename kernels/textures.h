@@ -13,13 +13,29 @@ inline int atlas_texel(const SceneData* s, float2 uv)
     return row * s->atlas_w + col;
 }
 
-inline Material material_at(const SceneData* s, int texel)
+inline Material material_from(global const float4* buffer, int texel)
 {
-    float4 a = s->material[3 * texel], b = s->material[3 * texel + 1], c = s->material[3 * texel + 2];
+    float4 a = buffer[3 * texel], b = buffer[3 * texel + 1], c = buffer[3 * texel + 2];
     /* ka = 0 would make D a delta (0/0 at h = n): the model's range starts at KA_MIN, as in the
      * reference (render/bsdf.py) */
     Material m = {a.xyz, b.xyz, c.xyz, fmax(a.w, 1e-6f), b.w};
     return m;
+}
+
+inline Material material_at(const SceneData* s, int texel)
+{
+    return material_from(s->material, texel);
+}
+
+/* The material a path samples its next direction from: the same one, except under the
+ * FIXED_PROPOSAL test hook (common.h). */
+inline Material proposal_at(const SceneData* s, int texel, const Material* m)
+{
+#ifdef FIXED_PROPOSAL
+    return material_from(s->proposal, texel);
+#else
+    return *m;
+#endif
 }
 
 /* Face and its coordinates (sc, tc) in [-1, 1] for a direction (OpenGL spec, table 3.21). */

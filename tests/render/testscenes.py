@@ -116,3 +116,58 @@ def box_room(kd=(0.6, 0.5, 0.4), light=8.0, ks=0.0, ka=0.1, size=(32, 24), windo
     camera = look_at_camera((-1.2, 1.4, 1.2), (0.5, 0.8, -0.8), width=size[0], height=size[1], fov_x_deg=75)
     ids = np.repeat(np.arange(len(parts)) + 1, 2).astype(np.int32)
     return Scene(Mesh(positions, faces, uvs, ids), maps, [camera])
+
+
+TILE, TILES = 4, 4  # textured_room: each part owns a TILE x TILE texel tile of a 16 x 16 atlas
+
+
+def tile_texels(tile: int) -> tuple[slice, slice]:
+    """Atlas rows and columns of a textured_room tile."""
+    row, col = divmod(tile, TILES)
+    return slice(TILE * row, TILE * row + TILE), slice(TILE * col, TILE * col + TILE)
+
+
+def _tile_uvs(uvs: np.ndarray, tile: int) -> np.ndarray:
+    """A quad's 0..1 UVs squeezed into its tile (inset 1e-3 texel: no lookup lands on a border)."""
+    row, col = divmod(tile, TILES)
+    size, inset = TILE * TILES, 1e-3
+    u = (TILE * col + inset + uvs[:, 0] * (TILE - 2 * inset)) / size
+    v = 1 - (TILE * row + inset + (1 - uvs[:, 1]) * (TILE - 2 * inset)) / size
+    return np.stack([u, v], 1).astype(np.float32)
+
+
+ROOM_TILES = {"floor": 0, "ceiling": 1, "back": 2, "front": 3, "left": 4, "right": 5, "light": 6, "table": 7,
+              "window": 8}
+
+
+def textured_room(size=(32, 24), seed=0):
+    """The box room with a texture on every part: 4 x 4 texels of random kd per part, a glossy
+    floor and table (ks, ka), a textured ceiling light (ke), a window (kw = 0.9) onto a random
+    sky (kg). Every texel kind the gradients must handle, in one small closed-but-for-the-window
+    scene; `ROOM_TILES` and `tile_texels` say which texels belong to which part."""
+    rng = np.random.default_rng(seed)
+    W, H, D = 2.0, 2.6, 1.5
+    parts = {
+        "floor": quad((0, 0, 0), (0, 0, D), (W, 0, 0)),
+        "ceiling": quad((0, H, 0), (W, 0, 0), (0, 0, D)),
+        "back": quad((0, H / 2, -D), (W, 0, 0), (0, H / 2, 0)),
+        "front": quad((0, H / 2, D), (0, H / 2, 0), (W, 0, 0)),
+        "left": quad((-W, H / 2, 0), (0, H / 2, 0), (0, 0, D)),
+        "right": quad((W, H / 2, 0), (0, 0, D), (0, H / 2, 0)),
+        "light": quad((0.3, H - 0.01, 0.2), (0.5, 0, 0), (0, 0, 0.4)),
+        "table": quad((-0.8, 0.4, -0.3), (0.3, 0, 0), (0, 0, 0.3)),
+        "window": quad((W - 0.005, 1.4, 0.0), (0, 0.5, 0), (0, 0, 0.6)),
+    }
+    mesh = merge(*[(p, f, _tile_uvs(uv, ROOM_TILES[name])) for name, (p, f, uv) in parts.items()])
+    side = TILE * TILES
+    maps = Maps.uniform(size=(side, side), kd=0.0, ks=0.0, ka=0.1, kg=0.0, cube=4)
+    maps.kg[:] = rng.uniform(1.0, 3.0, maps.kg.shape)
+    for name in ("floor", "ceiling", "back", "front", "left", "right", "table"):
+        maps.kd[tile_texels(ROOM_TILES[name])] = rng.uniform(0.3, 0.7, (TILE, TILE, 3))
+    for name, ks, ka in (("floor", 0.3, 0.08), ("table", 0.5, 0.03)):
+        maps.ks[tile_texels(ROOM_TILES[name])] = rng.uniform(0.8, 1.2, (TILE, TILE, 1)) * ks
+        maps.ka[tile_texels(ROOM_TILES[name])] = rng.uniform(0.8, 1.2, (TILE, TILE)) * ka
+    maps.ke[tile_texels(ROOM_TILES["light"])] = rng.uniform(4.0, 12.0, (TILE, TILE, 3))
+    maps.kw[tile_texels(ROOM_TILES["window"])] = 0.9
+    camera = look_at_camera((-1.2, 1.4, 1.2), (0.5, 0.8, -0.8), width=size[0], height=size[1], fov_x_deg=75)
+    return Scene(mesh, maps, [camera])

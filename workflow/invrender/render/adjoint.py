@@ -10,6 +10,7 @@ MILO's bucketed float accumulation is the alternative.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 import pyopencl as cl
@@ -21,11 +22,16 @@ from .renderer import Renderer
 log = logging.getLogger(__name__)
 
 GRAD_CHANNELS = {"kd": slice(0, 3), "ks": slice(3, 6), "ka": slice(6, 7), "ke": slice(7, 10), "kw": slice(10, 11)}
+MAPS = ("kd", "ks", "ka", "ke", "kw", "kg")  # the kernel's MAP_* order: one fixed-point scale each
 ATLAS_CHANNELS = 11
-FIXED_POINT_SCALE = float(2**32)  # resolution 2.3e-10 per addition, range +-2.1e9 per texel
 ACCUMULATIONS = ("fixed", "buckets")
 NUM_BUCKETS = 64  # MILO's count of gradient-map copies
 BUCKET_BUDGET_BYTES = 1 << 30  # fewer copies when 64 of a large atlas would not fit
+# Fixed point: the largest single addition to a map should be about 2^PEAK_BITS units, so a
+# texel can take 2^31 such additions before its int64 overflows, and each is resolved to
+# 2^-PEAK_BITS of the map's largest. A pass whose peak lands outside
+# [2^MIN_PEAK_BITS, 2^PEAK_BITS] units in some map runs again with that map's scale corrected.
+PEAK_BITS, MIN_PEAK_BITS = 32, 16
 
 
 def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, adjoint: np.ndarray, spp: int,
@@ -35,23 +41,55 @@ def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, ad
     accumulation: "fixed" (64-bit fixed-point atomics: the same seed gives the same bytes on one
     device; the default, see docs/benchmarks.md for its cost) or "buckets" (MILO's float copies
     chosen by ray id, compare-and-swap adds, then a reduction; not bitwise reproducible).
+    The kernel sees the adjoint divided by its largest magnitude, so the fixed-point range does
+    not depend on how the loss is normalised.
     """
     if accumulation not in ACCUMULATIONS:
         raise ValueError(f"backward: accumulation: expected one of {ACCUMULATIONS}, got {accumulation!r}")
+    adjoint = np.asarray(adjoint, np.float32)
+    if not np.isfinite(adjoint).all():
+        raise ValueError("backward: adjoint: expected finite dLoss/dL for every ray, got NaN or Inf")
     host = renderer.host
     sizes = (host.atlas_w * host.atlas_h * ATLAS_CHANNELS, 6 * host.cube_n * host.cube_n * 3)
-    if accumulation == "fixed":
-        atlas, kg = _accumulate(renderer, cameras, requests, adjoint, spp, seed, sizes, np.int64, 1, ())
-        atlas, kg = atlas / FIXED_POINT_SCALE, kg / FIXED_POINT_SCALE
+    norm = float(np.abs(adjoint).max()) if adjoint.size else 0.0
+    if norm == 0.0:
+        atlas, kg = np.zeros((sizes[0] // ATLAS_CHANNELS, ATLAS_CHANNELS)), np.zeros(sizes[1])
     else:
-        buckets = _bucket_count(num_buckets, sizes)
-        defines = ("-D ACCUMULATE_BUCKETS", f"-D NUM_BUCKETS={buckets}")
-        atlas, kg = _accumulate(renderer, cameras, requests, adjoint, spp, seed, sizes, np.float32, buckets, defines)
-    atlas = atlas.astype(np.float64).reshape(host.atlas_h, host.atlas_w, ATLAS_CHANNELS)
+        per_sample = adjoint / np.float32(norm * spp)  # each sample is 1/spp of the estimate
+        launch = lambda dtype, buckets, defines, scales: _accumulate(
+            renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines, scales)
+        if accumulation == "fixed":
+            atlas, kg = _fixed_point(launch)
+        else:
+            buckets = _bucket_count(num_buckets, sizes)
+            defines = ("-D ACCUMULATE_BUCKETS", f"-D NUM_BUCKETS={buckets}")
+            (atlas, kg), _ = launch(np.float32, buckets, defines, np.ones(len(MAPS)))
+            atlas = atlas.reshape(-1, ATLAS_CHANNELS).astype(np.float64)
+        atlas, kg = atlas * norm, kg.astype(np.float64) * norm
+    atlas = atlas.reshape(host.atlas_h, host.atlas_w, ATLAS_CHANNELS)
     out = {name: atlas[..., channels].squeeze(-1) if channels.stop - channels.start == 1 else atlas[..., channels]
            for name, channels in GRAD_CHANNELS.items()}
-    out["kg"] = kg.astype(np.float64).reshape(6, host.cube_n, host.cube_n, 3)
+    out["kg"] = kg.reshape(6, host.cube_n, host.cube_n, 3)
     return out
+
+
+def _fixed_point(launch) -> tuple[np.ndarray, np.ndarray]:
+    """Accumulate in 64-bit fixed point at scale 2^PEAK_BITS per map (the normalised adjoint
+    keeps additions near 1 in most scenes); where a map's largest addition says its scale was
+    too coarse or risked overflow, run again with the power of two its peak calls for. Peaks are
+    maxima, independent of order, so the choice and the bytes stay deterministic."""
+    scales = np.full(len(MAPS), 2.0**PEAK_BITS)
+    for _ in range(2):
+        (atlas, kg), peaks = launch(np.int64, 1, (), scales)
+        units = peaks * scales
+        off = (peaks > 0) & ((units < 2.0**MIN_PEAK_BITS) | (units > 2.0**PEAK_BITS))
+        if not off.any():
+            break
+        scales = np.where(off, 2.0 ** np.minimum(100, PEAK_BITS - np.ceil(np.log2(np.maximum(peaks, 1e-30)))), scales)
+        log.debug("adjoint: largest additions %s, fixed-point scales 2^%s, running again", peaks, np.log2(scales))
+    channel_scale = np.concatenate([np.full(c.stop - c.start, scales[MAPS.index(name)])
+                                    for name, c in GRAD_CHANNELS.items()])
+    return atlas.reshape(-1, ATLAS_CHANNELS) / channel_scale, kg / scales[MAPS.index("kg")]
 
 
 def _bucket_count(requested: int, sizes: tuple[int, int]) -> int:
@@ -62,21 +100,26 @@ def _bucket_count(requested: int, sizes: tuple[int, int]) -> int:
     return buckets
 
 
-def _accumulate(renderer, cameras, requests, adjoint, spp, seed, sizes, dtype, buckets, defines):
-    """Run adjoint_rays over all samples; returns the (atlas, kg) sums, reduced over buckets."""
+def _accumulate(renderer, cameras, requests, per_sample_adjoint, spp, seed, sizes, dtype, buckets, defines, scales):
+    """Run adjoint_rays over all samples; returns the (atlas, kg) sums, reduced over buckets,
+    and the largest single addition to each map."""
     context, queue = renderer.context, renderer.queue
-    program = build_program(context, "adjoint.cl", renderer.features.defines() + defines)
+    program = build_program(context, "adjoint.cl", renderer.defines + defines)
     n = len(requests)
     cams, reqs = renderer.request_buffers(cameras, requests)
     per_sample = np.zeros((n, 4), np.float32)
-    per_sample[:, :3] = np.asarray(adjoint, np.float32) / spp  # each sample is 1/spp of the estimate
+    per_sample[:, :3] = per_sample_adjoint
     adj = cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=per_sample)
     grads = [np.zeros(size * buckets, dtype) for size in sizes]
     rw = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
     bufs = [cl.Buffer(context, rw, hostbuf=grad) for grad in grads]
+    peaks = np.zeros(len(MAPS), np.float32)
+    peaks_buf = cl.Buffer(context, rw, hostbuf=peaks)
+    scales_buf = renderer._buffer(np.asarray(scales, np.float32))
     renderer.sample_launches(cl.Kernel(program, "adjoint_rays"), n, spp, seed, (cams, reqs, np.int32(n)),
-                             (adj, *bufs, np.float32(FIXED_POINT_SCALE), *(np.int32(size) for size in sizes)),
+                             (adj, *bufs, *(np.int32(size) for size in sizes), scales_buf, peaks_buf),
                              desc="adjoint")
+    cl.enqueue_copy(queue, peaks, peaks_buf)
     results = []
     for size, grad, buf in zip(sizes, grads, bufs):
         if buckets > 1:
@@ -85,4 +128,4 @@ def _accumulate(renderer, cameras, requests, adjoint, spp, seed, sizes, dtype, b
         out = np.empty(size, dtype)
         cl.enqueue_copy(queue, out, buf)  # the first `size` words: the sum
         results.append(out)
-    return results
+    return results, peaks.astype(np.float64)

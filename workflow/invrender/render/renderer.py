@@ -6,11 +6,11 @@ import numpy as np
 import pyopencl as cl
 from tqdm import tqdm
 
-from ..scene.types import Camera, Scene
+from ..scene.types import Camera, Maps, Scene
 from .device import context_and_queue
 from .features import Features
 from .program import build_program
-from .scene_buffers import GEOMETRY_ARGS, SCENE_ARG_ORDER, HostScene, pack_cameras
+from .scene_buffers import GEOMETRY_ARGS, SCENE_ARG_ORDER, HostScene, pack_cameras, pack_material
 
 LOCAL_SIZE = 64
 SAMPLES_PER_LAUNCH = 2_000_000  # path samples per kernel launch: keeps launches short on GPUs
@@ -27,11 +27,14 @@ class Renderer:
     """Renders a scene with kernels built for its features (analysed if not given).
 
     w_env and w_emit are the mixture weights of the environment and emitter strategies
-    (MILO uses 0.25 each); they apply only when the feature is compiled in.
+    (MILO uses 0.25 each); they apply only when the feature is compiled in. `proposal`, a test
+    hook, gives other maps to sample paths from (FIXED_PROPOSAL in kernels/common.h): the
+    renders are then importance-sampled estimates of `scene` with a proposal that stays put.
     """
 
     def __init__(self, scene: Scene, features: Features | None = None, device: str | None = None,
-                 w_env: float = 0.25, w_emit: float = 0.25, host_scene: HostScene | None = None):
+                 w_env: float = 0.25, w_emit: float = 0.25, host_scene: HostScene | None = None,
+                 proposal: Maps | None = None):
         if features is None:
             from .features import analyse
 
@@ -40,8 +43,12 @@ class Renderer:
         self.w_env, self.w_emit = w_env, w_emit
         self.context, self.queue = context_and_queue(device)
         self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
-        self.scene_args = self.host.upload(self.context) + list(self.host.strategy_weights(w_env, w_emit))
-        program = build_program(self.context, "render.cl", features.defines())
+        if proposal is not None:  # every sampling decision from the proposal: BSDF lobes and tables
+            self.host = self.host.sampling_from(HostScene.pack(scene.mesh, proposal, bvh=self.host.bvh))
+        self.proposal = None if proposal is None else self._buffer(pack_material(proposal))
+        self.defines = features.defines() + (() if proposal is None else ("-D FIXED_PROPOSAL",))
+        self.scene_args = self._scene_args(self.host.upload(self.context))
+        program = build_program(self.context, "render.cl", self.defines)
         self.render_kernel = cl.Kernel(program, "render_rays")
         self.aov_kernel = cl.Kernel(program, "primary_aovs")
 
@@ -52,8 +59,13 @@ class Renderer:
         self.scene.maps = maps
         on_device = {name: self.scene_args[SCENE_ARG_ORDER.index(name)] for name in GEOMETRY_ARGS}
         self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh)
-        self.scene_args = self.host.upload(self.context, reuse=on_device) + list(
-            self.host.strategy_weights(self.w_env, self.w_emit))
+        self.scene_args = self._scene_args(self.host.upload(self.context, reuse=on_device))
+
+    def _scene_args(self, buffers: list) -> list:
+        """SCENE_PARAMS in kernels/common.h: the scene's buffers, the strategy weights, and the
+        proposal material under the FIXED_PROPOSAL hook."""
+        weights = list(self.host.strategy_weights(self.w_env, self.w_emit))
+        return buffers + weights + ([] if self.proposal is None else [self.proposal])
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:

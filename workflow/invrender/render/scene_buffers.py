@@ -6,7 +6,7 @@ all-hits density of sampling strategy 4; the cube map gets its sampling distribu
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyopencl as cl
@@ -187,6 +187,10 @@ class HostScene:
         so its share goes to the BSDF lobes instead of to directions it cannot draw."""
         return np.float32(0.0 if self.env_black else w_env), np.float32(w_emit if self.num_emitters > 0 else 0.0)
 
+    def sampling_from(self, proposal: "HostScene") -> "HostScene":
+        """This scene with the environment and emitter sampling tables of `proposal`."""
+        return replace(self, **{name: getattr(proposal, name) for name in SAMPLING_ARGS})
+
     def upload(self, context: cl.Context, reuse: dict | None = None) -> list:
         """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers.
         `reuse` maps argument names to buffers already on the device (the geometry, when only
@@ -206,6 +210,10 @@ class HostScene:
 
 # Arguments that depend on the mesh only: new maps for the same mesh leave them as they are.
 GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
+
+# Arguments that say how directions are sampled (strategies 3 and 4), built from kg and ke.
+SAMPLING_ARGS = ("env_cdf", "env_pmf", "env_black", "em_v", "em_cdf", "em_pdf_area", "num_emitters", "em_bounds",
+                 "em_children")
 
 SCENE_ARG_ORDER = (
     "tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children", "material",
