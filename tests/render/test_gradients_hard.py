@@ -4,27 +4,11 @@ accumulation keeps its range and resolution however large or small the numbers g
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from testscenes import box_room, icosphere, look_at_camera
+from testscenes import box_room, hard_room, look_at_camera
 
 from invrender.render.adjoint import backward
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
-from invrender.scene.types import Mesh, Scene
-
-
-def hard_room(ks, ka, light, kd, open_top):
-    """The box room with a sphere, a zero-area and a sliver triangle; without its ceiling when
-    open_top (rays escape to the sky)."""
-    room = box_room(kd=kd, ks=ks, ka=ka, light=light, window=True)
-    p, f = icosphere(0.3, center=(0.5, 0.6, 0.0), subdivisions=1)
-    degenerate = np.array([[0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 0, 0], [1, 1e-9, 0], [2, 2e-9, 0]], np.float32)
-    n0, n1 = len(room.mesh.positions), len(room.mesh.positions) + len(p)
-    faces = np.concatenate([room.mesh.faces, f + n0, [[n1, n1 + 1, n1 + 2], [n1 + 3, n1 + 4, n1 + 5]]])
-    if open_top:
-        faces = np.concatenate([faces[:2], faces[4:]])
-    uvs = np.concatenate([room.mesh.uvs, np.full((len(p) + 6, 2), [0.25, 0.75], np.float32)])
-    mesh = Mesh(np.concatenate([room.mesh.positions, p, degenerate]), faces.astype(np.int32), uvs)
-    return Scene(mesh, room.maps, room.cameras)
 
 
 CAMERAS = {

@@ -171,3 +171,18 @@ def textured_room(size=(32, 24), seed=0):
     maps.kw[tile_texels(ROOM_TILES["window"])] = 0.9
     camera = look_at_camera((-1.2, 1.4, 1.2), (0.5, 0.8, -0.8), width=size[0], height=size[1], fov_x_deg=75)
     return Scene(mesh, maps, [camera])
+
+
+def hard_room(ks=1.0, ka=1e-6, light=1e6, kd=(0.6, 0.5, 0.4), open_top=False):
+    """The path tracer's hard cases in one scene: the box room with a window (and by default a
+    mirror-sharp ks = 1 lobe and emission 1e6), a sphere, a zero-area and a sliver triangle;
+    without its floor when open_top, so rays escape to the sky."""
+    room = box_room(kd=kd, ks=ks, ka=ka, light=light, window=True)
+    p, f = icosphere(0.3, center=(0.5, 0.6, 0.0), subdivisions=1)
+    degenerate = np.array([[0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 0, 0], [1, 1e-9, 0], [2, 2e-9, 0]], np.float32)
+    n0, n1 = len(room.mesh.positions), len(room.mesh.positions) + len(p)
+    faces = np.concatenate([room.mesh.faces, f + n0, [[n1, n1 + 1, n1 + 2], [n1 + 3, n1 + 4, n1 + 5]]])
+    uvs = np.concatenate([room.mesh.uvs, np.full((len(p) + 6, 2), [0.25, 0.75], np.float32)])
+    mesh = Mesh(np.concatenate([room.mesh.positions, p, degenerate]), faces[2 if open_top else 0:].astype(np.int32),
+                uvs)
+    return Scene(mesh, room.maps, room.cameras)
