@@ -81,6 +81,18 @@ def cmd_gradients(args):
                     seed=args.seed, iteration=args.iteration, device=args.device)
 
 
+def cmd_export(args):
+    from .export import export_usd
+
+    export_usd(args.scene, args.out, usdc=args.usdc, poses=args.poses, instancing=not args.no_instancing)
+
+
+def cmd_import_usd(args):
+    from .export import import_usd
+
+    import_usd(args.usd, args.out, exact=not args.standard_only)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -152,6 +164,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iteration", type=int, default=0, help="which batch of the seed's sequence")
     p.add_argument("--device")
     p.set_defaults(func=cmd_gradients)
+
+    p = stages.add_parser("export", help="a scene directory -> USD (scene.usda, textures/) for other tools")
+    p.add_argument("scene", help="scene directory (scene.json)")
+    p.add_argument("--out", required=True, help="directory to write (scene.usda, textures/, export.json)")
+    p.add_argument("--usdc", action="store_true", help="also write scene.usdc (the same layer, binary)")
+    p.add_argument("--poses", help="poses.json of duplicates (default: the poses in scene.json's metadata)")
+    p.add_argument("--no-instancing", action="store_true", help="export duplicates as plain meshes")
+    p.set_defaults(func=cmd_export)
+
+    p = stages.add_parser("import-usd", help="a USD stage written by `export` (perhaps edited) -> a scene directory")
+    p.add_argument("usd", help="scene.usda or scene.usdc")
+    p.add_argument("--out", required=True, help="scene directory to write")
+    p.add_argument("--standard-only", action="store_true",
+                   help="ignore the invrender: attributes: the scene other USD tools see")
+    p.set_defaults(func=cmd_import_usd)
 
     p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
     p.add_argument("what", choices=["render", "gradients"])
