@@ -119,20 +119,21 @@ class MaterialSources:
     kw: Source
     ka_from_roughness: bool = False
     metallic: Source | None = None  # set when the material uses the metallic workflow
+    ior: float = 1.5  # the metallic workflow's dielectric F0 = ((1 - ior) / (1 + ior))^2
 
     def key(self, name: str) -> tuple:
         """What decides map `name`: two materials with equal keys give it the same values."""
         if name == "kd":
             return (self.kd, self.metallic)
         if name == "ks":
-            return (self.ks, self.kd, self.metallic) if self.metallic else (self.ks,)
+            return (self.ks, self.kd, self.metallic, self.ior) if self.metallic else (self.ks,)
         if name == "ka":
             return (self.ka, self.ka_from_roughness)
         return (getattr(self, name),)
 
 
 FALLBACKS = {"diffuseColor": (0.18, 0.18, 0.18), "specularColor": (0.0, 0.0, 0.0), "roughness": (0.5,),
-             "emissiveColor": (0.0, 0.0, 0.0), "metallic": (0.0,)}  # UsdPreviewSurface's defaults
+             "emissiveColor": (0.0, 0.0, 0.0), "metallic": (0.0,), "ior": (1.5,)}  # UsdPreviewSurface's defaults
 
 
 def _asset_path(value, where: str) -> str:
@@ -202,11 +203,13 @@ def read_material(material: UsdShade.Material | None, where: str, exact: bool = 
     workflow = surface.GetInput("useSpecularWorkflow")
     specular = bool(workflow.Get()) if workflow and workflow.Get() is not None else False
     metallic = None if specular else _input_source(surface, "metallic", where)
+    ior = _input_source(surface, "ior", where).constant if not specular else None
+    workflow = {"metallic": metallic, "ior": float(ior[0]) if ior else 1.5}
     if exact_ka is not None and untouched:
         return MaterialSources(sources["diffuseColor"], sources["specularColor"], exact_ka, sources["emissiveColor"],
-                               kw, metallic=metallic)
+                               kw, **workflow)
     return MaterialSources(sources["diffuseColor"], sources["specularColor"], sources["roughness"],
-                           sources["emissiveColor"], kw, ka_from_roughness=True, metallic=metallic)
+                           sources["emissiveColor"], kw, ka_from_roughness=True, **workflow)
 
 
 def _read_texture(path: str, color_space: str) -> np.ndarray:
@@ -269,12 +272,14 @@ def evaluate(source: Source, shape: tuple[int, int], channels: int) -> np.ndarra
 
 def evaluate_maps(sources: MaterialSources, shape: tuple[int, int]) -> dict[str, np.ndarray]:
     """kd, ks, ka, ke, kw over the atlas from a material's sources. The metallic workflow is
-    turned into ours: kd = base (1 - metallic), ks = 0.04 (1 - metallic) + base metallic."""
+    turned into ours: kd = base (1 - metallic), ks = F0 (1 - metallic) + base metallic with the
+    dielectric F0 = ((1 - ior) / (1 + ior))^2 (0.04 at UsdPreviewSurface's default ior 1.5)."""
     kd = evaluate(sources.kd, shape, 3)
     ks = evaluate(sources.ks, shape, 3)
     if sources.metallic is not None:
         metallic = np.clip(evaluate(sources.metallic, shape, 1), 0.0, 1.0)
-        ks = 0.04 * (1.0 - metallic) + kd * metallic
+        f0 = ((1.0 - sources.ior) / (1.0 + sources.ior)) ** 2
+        ks = f0 * (1.0 - metallic) + kd * metallic
         kd = kd * (1.0 - metallic)
     ka = evaluate(sources.ka, shape, 1)[..., 0]
     ka = ka_from_roughness(ka) if sources.ka_from_roughness else ka
