@@ -19,6 +19,7 @@ include: "workflow/rules/geometry.smk"
 include: "workflow/rules/gradients.smk"
 include: "workflow/rules/features.smk"
 include: "workflow/rules/render.smk"
+include: "workflow/rules/export.smk"
 
 
 localrules:

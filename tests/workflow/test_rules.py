@@ -180,6 +180,36 @@ def test_render_writes_every_view(built):
             assert (renders / "aovs" / f"{exr.stem}_{aov}.exr").is_file()
 
 
+def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
+    from pxr import Usd, UsdGeom, UsdLux
+
+    from invrender.export import validate_usd
+
+    workdir, _ = built
+    result = snakemake(workdir, "--cores", "2", "-p", "results/room/export", "results/cans/export",
+                       "--config", "export={usdc: true}")
+    assert job_counts(result.stdout) == {"export": 2}
+    assert "--poses results/cans/capture/ground_truth/poses.json" in result.stdout
+    for scene in ("room", "cans"):
+        export = workdir / "results" / scene / "export"
+        for layer in ("scene.usda", "scene.usdc"):
+            assert validate_usd(export / layer) == [], (scene, layer)
+        stage = Usd.Stage.Open(str(export / "scene.usda"))
+        assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0 and UsdGeom.GetStageUpAxis(stage) == "Y"
+        cameras = [p for p in stage.Traverse() if p.IsA(UsdGeom.Camera)]
+        assert len(cameras) == VIEWS[scene]
+        summary = read_json(export / "export.json")
+        assert summary["prims"]["cameras"] == VIEWS[scene] and summary["prims"]["dome"]
+        assert (export / "textures" / "kd.exr").is_file() and (export / "textures" / "sky_latlong.exr").is_file()
+        assert (workdir / "results" / scene / "logs/export.log").stat().st_size > 0
+        assert (workdir / "results" / scene / "benchmarks/export.tsv").is_file()
+    room = Usd.Stage.Open(str(workdir / "results/room/export/scene.usda"))
+    assert len([p for p in room.Traverse() if p.HasAPI(UsdLux.MeshLightAPI)]) == 2  # the two ceiling panels
+    cans = Usd.Stage.Open(str(workdir / "results/cans/export/scene.usda"))
+    count = test_config["scenes"]["cans"]["synthetic"]["config"]["count"]
+    assert len([p for p in cans.Traverse() if p.IsInstance()]) == count and len(cans.GetPrototypes()) == 1
+
+
 def test_user_capture_has_no_scene_to_render(built):
     workdir, config = built
     result = snakemake(workdir, "-n", "results/mine/renders", config=config, check=False)

@@ -16,7 +16,7 @@ import yaml
 from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
 
 RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry",
-                  "gradients": "gradients", "features.json": "features", "renders": "render"}
+                  "gradients": "gradients", "features.json": "features", "renders": "render", "export": "export"}
 OUTPUTS = tuple(RULE_OF_OUTPUT)
 
 
@@ -26,7 +26,8 @@ def complete(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("complete")
     result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "all": 1,
+        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "export": 2,
+        "all": 1,
     }
     return workdir
 
@@ -61,8 +62,8 @@ def test_report_shows_the_renders(complete):
     report = complete / "report.html"
     snakemake(complete, "--report", report)
     html = report.read_text(errors="replace")
-    assert "Renders" in html and "Geometry" in html and "Features" in html
-    for view in ("view_000.png", "view_001.png", "features.json", "geometry.json"):
+    assert "Renders" in html and "Geometry" in html and "Features" in html and "Export" in html
+    for view in ("view_000.png", "view_001.png", "features.json", "geometry.json", "export.json"):
         assert view in html
 
 

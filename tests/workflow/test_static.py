@@ -34,7 +34,8 @@ def test_snakefmt_check():
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "all": 1,
+        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "export": 2,
+        "all": 1,
     }
 
 
@@ -43,7 +44,7 @@ def test_rulegraph_picture_is_current(tmp_path):
     result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
     rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
     svg = (REPO / "docs" / "rulegraph.svg").read_text()
-    assert rules == {"all", "synthesize", "cameras", "geometry", "gradients", "features", "render"}
+    assert rules == {"all", "synthesize", "cameras", "geometry", "gradients", "features", "render", "export"}
     for rule in rules:
         assert f">{rule}</text>" in svg
 
@@ -145,7 +146,7 @@ def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
     result = snakemake(tmp_path, *args)
     resources = _resources_by_rule(result.stdout)
     resources.pop("all", None)
-    assert set(resources) == {"synthesize", "cameras", "geometry", "gradients", "features", "render"}
+    assert set(resources) == {"synthesize", "cameras", "geometry", "gradients", "features", "render", "export"}
     for rule, line in resources.items():
         assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line
         if rule in RAY_TRACING_RULES:

@@ -155,6 +155,7 @@ def scene_targets(scene):
             f"results/{scene}/capture",
             f"results/{scene}/features.json",
             f"results/{scene}/renders",
+            f"results/{scene}/export",
         ]
     return targets
 
@@ -196,19 +197,20 @@ def capture_cameras_input(wildcards):
 
 
 def scene_dir(wildcards):
-    """The scene directory (scene.json) that features and render read. Until the bake stage
-    exists that is the synthetic scene's ground truth; swap it here for results/{scene}/scene.
+    """The scene directory (scene.json) that features, render and export read. Until the
+    bake stage exists that is the synthetic scene's ground truth; swap it here for
+    results/{scene}/scene.
     """
     if not is_synthetic(wildcards.scene):
         raise WorkflowError(
-            f"scene {wildcards.scene!r} is a capture: features and render need a scene "
+            f"scene {wildcards.scene!r} is a capture: features, render and export need a scene "
             "directory, which only synthetic scenes have until the bake stage exists"
         )
     return f"results/{wildcards.scene}/capture/ground_truth/scene"
 
 
 def scene_input(wildcards):
-    """The output that holds scene_dir(wildcards): what features and render depend on."""
+    """The output that holds scene_dir(wildcards): what features, render and export depend on."""
     scene_dir(wildcards)
     return f"results/{wildcards.scene}/capture"
 
@@ -249,6 +251,28 @@ def geometry_options(wildcards):
         f"--target-faces {geometry['target_faces']} {size} "
         f"--padding {geometry['padding']} --poisson-depth {geometry['poisson_depth']}"
     )
+
+
+def scene_poses(wildcards):
+    """The poses of a duplicates scene's copies (DESIGN.md: duplicates/poses.json): the
+    synthetic scene's truth until the duplicates stage writes its own."""
+    synthetic = SCENES[wildcards.scene].get("synthetic", {})
+    if synthetic.get("kind") == "duplicates":
+        return f"results/{wildcards.scene}/capture/ground_truth/poses.json"
+    return None
+
+
+def export_options(wildcards):
+    """invrender export's flags: --usdc, --no-instancing, and the poses of duplicates."""
+    options = []
+    if config["export"]["usdc"]:
+        options.append("--usdc")
+    if not config["export"]["instancing"]:
+        options.append("--no-instancing")
+    poses = scene_poses(wildcards)
+    if poses:
+        options.append(f"--poses {shlex.quote(poses)}")
+    return " ".join(options)
 
 
 def device_option(wildcards):
