@@ -1,6 +1,8 @@
 """Gradients on the path tracer's hard cases: never a NaN or an Inf, and the fixed-point
 accumulation keeps its range and resolution however large or small the numbers get."""
 
+import logging
+
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -38,7 +40,7 @@ def test_hard_cases_never_give_nan_or_inf_gradients(ks, ka, light, kd, open_top,
         assert np.isfinite(grad).all(), name
 
 
-def test_fixed_point_follows_the_numbers_up_and_down():
+def test_fixed_point_follows_the_numbers_up_and_down(caplog):
     """Emission 1e6 seen in a mirror with an adjoint of 1e6 (additions far beyond the first
     scale's headroom) and an adjoint of 1e-12 (far below its resolution) give the same gradients
     as float accumulation, and scaling the adjoint scales the gradient exactly."""
@@ -48,9 +50,22 @@ def test_fixed_point_follows_the_numbers_up_and_down():
     adjoint = np.random.default_rng(3).uniform(-1, 1, (len(requests), 3)).astype(np.float32)
     renderer = Renderer(scene, Features.everything(max_bounces=3))
     unit = backward(renderer, [cam], requests, adjoint, spp=8, seed=1, accumulation="buckets")
+    caplog.set_level(logging.DEBUG, logger="invrender.render.adjoint")
     for factor in (1e6, 1e-12):
+        caplog.clear()
         fixed = backward(renderer, [cam], requests, adjoint * np.float32(factor), spp=8, seed=1)
+        assert "running again" in caplog.text  # the near-mirror's d/dka needs its own scale
         for name in unit:
             scale = np.abs(unit[name]).max() * factor
             assert scale > 0, name
             np.testing.assert_allclose(fixed[name], unit[name] * factor, rtol=0, atol=1e-4 * scale, err_msg=name)
+
+
+def test_an_ordinary_scene_takes_one_fixed_point_pass(caplog):
+    scene = box_room(ks=0.3, ka=0.05, window=True)
+    cam = scene.cameras[0]
+    requests = pixel_requests(cam)
+    adjoint = np.random.default_rng(4).uniform(-1e-6, 1e-6, (len(requests), 3)).astype(np.float32)
+    caplog.set_level(logging.DEBUG, logger="invrender.render.adjoint")
+    backward(Renderer(scene, Features.everything(max_bounces=10)), [cam], requests, adjoint, spp=8, seed=1)
+    assert "running again" not in caplog.text

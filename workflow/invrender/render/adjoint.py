@@ -27,11 +27,11 @@ ATLAS_CHANNELS = 11
 ACCUMULATIONS = ("fixed", "buckets")
 NUM_BUCKETS = 64  # MILO's count of gradient-map copies
 BUCKET_BUDGET_BYTES = 1 << 30  # fewer copies when 64 of a large atlas would not fit
-# Fixed point: the largest single addition to a map should be about 2^PEAK_BITS units, so a
-# texel can take 2^31 such additions before its int64 overflows, and each is resolved to
-# 2^-PEAK_BITS of the map's largest. A pass whose peak lands outside
-# [2^MIN_PEAK_BITS, 2^PEAK_BITS] units in some map runs again with that map's scale corrected.
-PEAK_BITS, MIN_PEAK_BITS = 32, 16
+# Fixed point: a texel channel takes at most one addition per path vertex, so with the largest
+# addition at most 2^62 / (rays x spp x (B + 2)) units ("top") no int64 can overflow; each
+# addition is resolved to 2^-RESOLUTION_BITS of the map's largest or better. The first pass
+# puts a peak of 1.0 mid-window; a map whose peak falls outside the window runs again.
+RESOLUTION_BITS = 24
 
 
 def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, adjoint: np.ndarray, spp: int,
@@ -59,7 +59,7 @@ def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, ad
         launch = lambda dtype, buckets, defines, scales: _accumulate(
             renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines, scales)
         if accumulation == "fixed":
-            atlas, kg = _fixed_point(launch)
+            atlas, kg = _fixed_point(launch, len(requests) * spp * (renderer.features.max_bounces + 2))
         else:
             buckets = _bucket_count(num_buckets, sizes)
             defines = ("-D ACCUMULATE_BUCKETS", f"-D NUM_BUCKETS={buckets}")
@@ -73,19 +73,23 @@ def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, ad
     return out
 
 
-def _fixed_point(launch) -> tuple[np.ndarray, np.ndarray]:
-    """Accumulate in 64-bit fixed point at scale 2^PEAK_BITS per map (the normalised adjoint
-    keeps additions near 1 in most scenes); where a map's largest addition says its scale was
-    too coarse or risked overflow, run again with the power of two its peak calls for. Peaks are
-    maxima, independent of order, so the choice and the bytes stay deterministic."""
-    scales = np.full(len(MAPS), 2.0**PEAK_BITS)
+def _fixed_point(launch, additions: int) -> tuple[np.ndarray, np.ndarray]:
+    """Accumulate in 64-bit fixed point with one power-of-two scale per map, chosen so that
+    `additions` (an upper bound on the additions to one texel channel) of the map's largest
+    value cannot overflow. The first pass guesses (the normalised adjoint keeps peaks within
+    2^+-12 of 1 in ordinary scenes); where a map's largest addition says the guess risked
+    overflow or resolved too coarsely, the pass runs again with the scale its peak calls for.
+    Peaks are maxima, independent of order, so the choice and the bytes stay deterministic."""
+    top = math.floor(62 - math.log2(max(additions, 1)))
+    scales = np.full(len(MAPS), 2.0 ** (top - RESOLUTION_BITS // 2))
     for _ in range(2):
         (atlas, kg), peaks = launch(np.int64, 1, (), scales)
         units = peaks * scales
-        off = (peaks > 0) & ((units < 2.0**MIN_PEAK_BITS) | (units > 2.0**PEAK_BITS))
+        off = (peaks > 0) & ((units < 2.0 ** (top - RESOLUTION_BITS)) | (units > 2.0**top))
         if not off.any():
             break
-        scales = np.where(off, 2.0 ** np.minimum(100, PEAK_BITS - np.ceil(np.log2(np.maximum(peaks, 1e-30)))), scales)
+        fitted = 2.0 ** np.minimum(100, top - 1 - np.ceil(np.log2(np.maximum(peaks, 1e-30))))
+        scales = np.where(off, fitted, scales)
         log.debug("adjoint: largest additions %s, fixed-point scales 2^%s, running again", peaks, np.log2(scales))
     channel_scale = np.concatenate([np.full(c.stop - c.start, scales[MAPS.index(name)])
                                     for name, c in GRAD_CHANNELS.items()])
