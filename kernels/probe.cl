@@ -12,12 +12,6 @@
 #include "sampling.h"
 #include "integrator.h"
 
-inline Material material_from(global const float4* m, int i)
-{
-    Material out = {m[3 * i].xyz, m[3 * i + 1].xyz, m[3 * i + 2].xyz, m[3 * i].w, m[3 * i + 1].w};
-    return out;
-}
-
 /* Per case: f cos, and the densities of strategies 1 and 2 (x: diffuse pdf, y: specular pdf). */
 kernel void probe_bsdf(global const float4* materials, global const float4* n, global const float4* wo,
                        global const float4* wi, global float4* f_cos, global float2* pdfs)
