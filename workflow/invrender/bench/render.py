@@ -823,15 +823,17 @@ def write_csv(path: Path, rows: list[dict]):
             writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
 
 
-def plot(curves: list[dict], equal: list[dict], path: Path) -> str | None:
-    """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped."""
+def plot(curves: list[dict], equal: list[dict], path: Path, xlabel: str = "wall time per image [s]",
+         ylabel: str = "RMSE vs reference", curves_csv: str = "render_curves.csv") -> str | None:
+    """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped.
+    Rows: curves with bounces, renderer, wall_s, rmse; equal with bounces, target_rmse."""
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        return "matplotlib is not installed: plot skipped (the curves are in render_curves.csv)"
+        return f"matplotlib is not installed: plot skipped (the curves are in {curves_csv})"
     bounces = sorted({c["bounces"] for c in curves})
     fig, axes = plt.subplots(1, len(bounces), figsize=(5 * len(bounces), 4), squeeze=False)
     for ax, b in zip(axes[0], bounces):
@@ -841,8 +843,8 @@ def plot(curves: list[dict], equal: list[dict], path: Path) -> str | None:
         target = [e for e in equal if e["bounces"] == b][0]["target_rmse"]
         ax.axhline(target, color="grey", lw=0.8, ls=":")
         ax.set_title(f"{b} bounces")
-        ax.set_xlabel("wall time per image [s]")
-        ax.set_ylabel("RMSE vs reference")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
         ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
