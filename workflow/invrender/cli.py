@@ -78,7 +78,7 @@ def cmd_gradients(args):
     from .render.gradients_stage import write_gradients
 
     write_gradients(args.geometry, args.cameras, args.images, args.out, batch=args.batch, spp=args.spp,
-                    seed=args.seed, iteration=args.iteration, device=args.device)
+                    seed=args.seed, iteration=args.iteration, device=args.device, accumulation=args.accumulation)
 
 
 def cmd_export(args):
@@ -162,6 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--iteration", type=int, default=0, help="which batch of the seed's sequence")
+    p.add_argument("--accumulation", choices=["fixed", "buckets"], default="fixed",
+                   help="fixed: 64-bit fixed point, bitwise reproducible; buckets: MILO's float copies")
     p.add_argument("--device")
     p.set_defaults(func=cmd_gradients)
 

@@ -31,8 +31,9 @@ rule gradients:
         batch=config["gradients"]["batch"],
         spp=config["gradients"]["spp"],
         seed=config["gradients"]["seed"],
+        accumulation=config["gradients"]["accumulation"],
         device=device_option,
     shell:
         "invrender --log {log} gradients --geometry {input.geometry} --cameras {input.cameras}"
         " --images {params.images:q} --out {output} --batch {params.batch} --spp {params.spp}"
-        " --seed {params.seed} {params.device}"
+        " --seed {params.seed} --accumulation {params.accumulation} {params.device}"

@@ -65,7 +65,8 @@ def signed_preview(gradient: np.ndarray) -> np.ndarray:
 
 
 def write_gradients(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
-                    seed: int = 0, iteration: int = 0, device: str | None = None) -> dict:
+                    seed: int = 0, iteration: int = 0, device: str | None = None,
+                    accumulation: str = "fixed") -> dict:
     scene = initial_scene(geometry_dir, cameras_path)
     total = sum(c.width * c.height for c in scene.cameras)
     requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
@@ -75,8 +76,9 @@ def write_gradients(geometry_dir, cameras_path, images_dir, out_dir, batch: int 
     residual = radiance.astype(np.float64) - target
     norm = np.linalg.norm(residual, axis=1, keepdims=True)
     adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
-    grads = backward(renderer, scene.cameras, requests, adjoint, spp, seed ^ (1 << 63))
+    grads = backward(renderer, scene.cameras, requests, adjoint, spp, seed ^ (1 << 63), accumulation)
     report = {"loss": float(norm.sum()), "rays": len(requests), "spp": spp, "seed": seed, "iteration": iteration,
+              "accumulation": accumulation,
               "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}
     log.info("loss %.6g over %d rays; gradient norms %s", report["loss"], len(requests), report["norms"])
     with atomic_dir(Path(out_dir)) as tmp:
