@@ -70,15 +70,16 @@ def connected_faces(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     the same label. Labels are 0.. in order of each group's first face."""
     points, point_of = weld(positions)
     corners = point_of[faces]  # (m, 3)
-    label = np.arange(len(points))
-    while True:  # propagate the smallest point label over faces until nothing changes
-        face_label = label[corners].min(axis=1)
-        new = label.copy()
-        np.minimum.at(new, corners.ravel(), np.repeat(face_label, 3))
-        if np.array_equal(new, label):
+    a, b = np.concatenate([corners[:, 0], corners[:, 1]]), np.concatenate([corners[:, 1], corners[:, 2]])
+    root = np.arange(len(points))
+    while True:  # union-find on the edges: hook the larger root under the smaller, then flatten
+        ra, rb = root[a], root[b]
+        if np.array_equal(ra, rb):
             break
-        label = new
-    face_label = label[corners].min(axis=1)
+        np.minimum.at(root, np.maximum(ra, rb), np.minimum(ra, rb))
+        while not np.array_equal(root, root[root]):
+            root = root[root]
+    face_label = root[corners[:, 0]]
     _, first, inverse = np.unique(face_label, return_index=True, return_inverse=True)
     rank = np.empty(len(first), np.int64)
     rank[np.argsort(first)] = np.arange(len(first))  # number the groups by their first face

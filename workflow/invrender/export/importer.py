@@ -181,7 +181,7 @@ def assemble(pieces: list[MeshPiece]) -> tuple[Mesh, np.ndarray]:
     positions = np.concatenate([p.positions for p in pieces]).astype(np.float32)
     uvs = np.concatenate([p.uvs for p in pieces]).astype(np.float32)
     vertex_keys = _settle(vertex_keys, np.hstack([positions, uvs]).view(np.int32))  # compare bits
-    unique_keys, first, vertex_of_row = np.unique(vertex_keys, return_index=True, return_inverse=True)
+    _, first, vertex_of_row = np.unique(vertex_keys, return_index=True, return_inverse=True)
     vertex_of_row = vertex_of_row.reshape(-1)
 
     offsets = np.cumsum([0] + [len(p.positions) for p in pieces])

@@ -229,13 +229,15 @@ def texture_shape(source: Source) -> tuple[int, int] | None:
     return _read_texture_cached(source.file, source.color_space).shape[:2]
 
 
-_CACHE: dict = {}
+_CACHE: dict = {}  # materials share textures: read each once per import
 
 
 def _read_texture_cached(path: str, color_space: str) -> np.ndarray:
-    key = (path, color_space)
+    stat = Path(path).stat()
+    key = (path, stat.st_mtime_ns, stat.st_size, color_space)  # a rewritten file is read again
     if key not in _CACHE:
-        _CACHE.clear() if len(_CACHE) > 16 else None
+        if len(_CACHE) >= 16:
+            _CACHE.clear()
         _CACHE[key] = _read_texture(path, color_space)
     return _CACHE[key]
 
