@@ -59,3 +59,36 @@ def test_mean_radiance_is_the_area_weighted_mean_of_the_texels_under_the_faces()
     maps.ke[0, 0], maps.ke[1, 1] = 2.0, 6.0  # texel (row 0, col 0) under the first, (1, 1) under the second
     assert np.allclose(mean_radiance(mesh, maps, np.array([0, 1])), 5.0)
     assert np.allclose(mean_radiance(mesh, maps, np.array([1])), 6.0)
+
+
+@pytest.mark.parametrize("schema, up, zenith", [
+    ("DomeLight", "Y", (0, 1, 0)),  # the export's own form
+    ("DomeLight_1", "Z", (0, 1, 0)),  # pole on the stage's up axis (poleAxis "scene"), Z up -> our +Y
+    ("DomeLight", "Z", (0, 0, -1)),  # DomeLight's pole is the stage's +Y whatever its up axis
+])
+def test_imported_dome_puts_its_pole_where_usdlux_says(tmp_path, schema, up, zenith):
+    """A sky bright within 30 degrees of the lat-long's pole (its top rows) lights exactly the cube
+    texels whose centres lie within 30 degrees of where the pole must end up in our world."""
+    from pxr import Usd, UsdGeom, UsdLux
+
+    from invrender.export.importer import stage_to_scene
+    from invrender.export.lights import read_dome
+    from invrender.render.sampling import cube_to_direction
+    from invrender.scene.images import write_exr
+
+    height = 181  # rows 1 degree apart: latitude 90 - i
+    image = np.zeros((height, 2 * height, 3), np.float32)
+    image[:30] = 1.0  # latitude > 60.5 degrees
+    write_exr(tmp_path / "sky.exr", image)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "dome.usda"))
+    UsdGeom.SetStageUpAxis(stage, up)
+    dome = getattr(UsdLux, schema).Define(stage, "/dome")
+    dome.CreateTextureFileAttr("./sky.exr")
+    n = 16
+    kg = read_dome(dome.GetPrim(), stage_to_scene(stage), n, "test")
+    face = np.repeat(np.arange(6), n * n).reshape(6, n, n)
+    row, col = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    centres = cube_to_direction(face, np.broadcast_to((col + 0.5) / n, face.shape), np.broadcast_to((row + 0.5) / n, face.shape))
+    angle = np.degrees(np.arccos(np.clip(centres @ np.asarray(zenith, float), -1, 1)))
+    lit = kg[..., 0] > 0
+    assert lit.any() and np.all(angle[lit] < 30.0) and np.all(lit[angle < 28.5])

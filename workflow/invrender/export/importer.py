@@ -110,7 +110,7 @@ def read_stage(stage: Usd.Stage, where: str, exact: bool = True) -> StageContent
     for prim in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)):
         if prim.IsA(UsdGeom.Mesh):
             _read_mesh_prim(prim, to_scene, contents, where, exact)
-        elif prim.IsA(UsdLux.DomeLight) and contents.kg is None:
+        elif (prim.IsA(UsdLux.DomeLight) or prim.IsA(UsdLux.DomeLight_1)) and contents.kg is None:
             if UsdGeom.Imageable(prim).ComputeVisibility() != UsdGeom.Tokens.invisible:
                 contents.kg = read_dome(prim, to_scene, DEFAULT_CUBE, where)
         elif prim.IsA(UsdGeom.Camera) and not prim.IsInstanceProxy():

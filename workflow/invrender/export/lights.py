@@ -101,9 +101,9 @@ def _light_scale(light: UsdLux.LightAPI) -> np.ndarray:
 
 
 def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str) -> np.ndarray:
-    """kg (6, N, N, 3) of a DomeLight: its lat-long texture (or white) x colour x intensity x
-    2^exposure, turned by the dome's rotation."""
-    dome = UsdLux.DomeLight(prim)
+    """kg (6, N, N, 3) of a DomeLight (or DomeLight_1): its lat-long texture (or white) x colour x
+    intensity x 2^exposure, turned by the dome's rotation and pole axis."""
+    dome = UsdLux.DomeLight(prim)  # DomeLight_1 has the same texture attributes
     n = prim.GetAttribute(schema.CUBE_SIZE).Get() if prim.HasAttribute(schema.CUBE_SIZE) else None
     n = int(n or default_n)
     scale = _light_scale(UsdLux.LightAPI(prim)).astype(np.float32)
@@ -119,8 +119,21 @@ def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str) 
         image = np.ones((2, 4, 3), np.float32)
     world = to_scene @ np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), np.float64).T
     u, _, vt = np.linalg.svd(world[:3, :3])
-    rotation = u @ vt
-    return latlong_to_cube(image, n, None if np.allclose(rotation, np.eye(3), atol=0) else rotation) * scale
+    rotation = u @ vt @ _pole_rotation(prim)
+    return latlong_to_cube(image, n, None if np.array_equal(rotation, np.eye(3)) else rotation) * scale
+
+
+def _pole_rotation(prim: Usd.Prim) -> np.ndarray:
+    """DomeLight_1 with its pole on Z (poleAxis "Z", or "scene" on a Z-up stage): the lat-long's +Y
+    pole turned onto +Z. DomeLight's pole is +Y whatever the stage's up axis (its specification)."""
+    if not prim.IsA(UsdLux.DomeLight_1):
+        return np.eye(3)
+    pole = UsdLux.DomeLight_1(prim).GetPoleAxisAttr().Get() or UsdLux.Tokens.scene
+    if pole == UsdLux.Tokens.scene:
+        pole = UsdGeom.GetStageUpAxis(prim.GetStage())
+    if pole != "Z":
+        return np.eye(3)
+    return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # +90 deg about X: +Y -> +Z
 
 
 def mean_radiance(mesh: Mesh, maps: Maps, face_ids: np.ndarray) -> np.ndarray:
