@@ -28,20 +28,22 @@ would measure the plugin, not Mitsuba. The room's atlas is 256 x 256: its kd *is
    = RMSE over the covered texels (start kd > 0) and channels of a pass's gradient against the
    reference, the reference's own noise subtracted. A ladder of spp per renderer, interleaved
    (A B, B A) in shuffled order, `repeats` passes per rung; time = median wall clock of a pass
-   (gradient in numpy), each spp warmed up first (Mitsuba compiles a kernel per new spp).
+   (gradient in numpy), each spp warmed up first.
    ratio = t_mitsuba / t_invrender at the lower error both ladders reach (> 1: invrender
    faster), interpolated log-log; beside it the ratio from a fit error = k / sqrt(spp),
    t = a + b spp, and from process CPU time. The forward and backward halves of a pass are
-   timed separately at the top rung (the profile table).
+   timed separately at the top rung (the profile table), and each backward is also run alone,
+   fed the converged forward image: the share of a pass's variance that is the backward's own.
    One-time costs are excluded and reported: invrender's HostScene.pack, upload and render
    kernel build, first pass (adjoint kernel build); Mitsuba's conversion, load_dict, first pass
-   per spp (JIT compilation or a drjit kernel-cache hit). Not in a pass either: uploading new
+   (JIT compilation or a drjit kernel-cache hit). Not in a pass either: uploading new
    maps (an optimiser's step), reported as its own row.
 2. **Peak memory of a 65,536-ray, 10-bounce gradient pass**: a 256 x 256 camera at 1 spp, in a
-   subprocess per renderer (and accumulation mode): RSS after setup (scene loaded, kernels
-   built), peak RSS growth during the first pass and during a second one (after
-   ``dr.flush_malloc_cache()`` for Mitsuba, whose allocator keeps freed memory), and the
-   process's peak RSS. PoCL's device buffers live in host memory, so RSS sees them.
+   subprocess per renderer (and accumulation mode): RSS after setup (scene loaded; the adjoint
+   kernel and Mitsuba's JIT come with the first pass), peak RSS growth during the first pass and
+   during a second one (after ``dr.flush_malloc_cache()`` for Mitsuba, whose allocator keeps
+   freed memory; glibc's mmap threshold fixed, PROBE_ENV), and the process's peak RSS. PoCL's
+   device buffers live in host memory, so RSS sees them.
 3. **What determinism costs**: ``accumulation="fixed"`` (64-bit fixed-point atomics, the same
    bytes for the same seed) against ``"buckets"`` (MILO's float copies by ray id): the same
    passes interleaved, backward time and whole-pass time, and how far the two gradients differ.
@@ -424,7 +426,9 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
            "samples_per_s_invrender": s_inv["samples_per_s"], "var_per_sample_invrender": s_inv["var_per_sample"],
            "cpu_per_wall_invrender": s_inv["cpu_per_wall"], "features": asdict(features),
            "ref_spp": {name: c["spp"] for name, c in converged.items()}, "target_spp": settings.target_spp,
-           "target_render_s": target_s}
+           "target_render_s": target_s,
+           # How large L - target is against L: a difference d in L is d / this in the L2 gradient.
+           "residual_rel": float(np.mean(np.abs(forward_image - target)) / np.mean(forward_image))}
     profile = [{"section": "profile", "bounces": bounces, "renderer": name, "spp": s["top"]["spp"],
                 "pass_s": s["top"]["wall_s"], "forward_s": s["top"]["forward_s"], "backward_s": s["top"]["backward_s"],
                 "backward_over_forward": s["top"]["backward_s"] / s["top"]["forward_s"],
@@ -524,7 +528,7 @@ def memory_probe(renderer: str, side: int, bounces: int, accumulation: str, vari
             "accumulation": accumulation if renderer == "invrender" else "-", "rays": side * side,
             "bounces": bounces, "rss_after_setup_mb": setup_mb, "first_pass_growth_mb": first.growth / 2**20,
             "rss_before_second_mb": before_second, "pass_growth_mb": second.growth / 2**20,
-            # Polled, not ru_maxrss: a child started by fork + exec inherits its parent's high-water mark.
+            # Polled, not ru_maxrss: in these children it read the parent's high-water mark.
             "peak_rss_mb": max(setup_mb, first.peak / 2**20, second.peak / 2**20),
             "first_pass_s": first_s, "pass_s": second_s, "pass_cpu_s": second_cpu}
 
