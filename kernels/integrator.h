@@ -55,7 +55,7 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
                          int* suspect, PathVertex* path, int* length)
 {
     float3 radiance = (float3)(0.0f), beta = (float3)(1.0f);
-    int skip = -1;
+    int skip = -1, for_derivative = 0;
     if (path)
         *length = 0;
     for (int bounce = 0;; ++bounce) {
@@ -85,8 +85,15 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
             break;
         Material q = proposal_at(s, sp.texel, &m);
         MixtureWeights w = mixture_weights(s, &q);
-        if (!reflects(&w))
-            break;
+        if (!reflects(&w)) {
+            /* A black texel (kd = ks = 0) ends the path, but d(f cos)/d kd there is cos / pi,
+             * not 0: a recorded path (the adjoint) goes on from the first one with kd's lobe in
+             * the mixture and beta 0, to estimate the light arriving there. */
+            if (!path || !(max3(beta) > 0.0f))
+                break;
+            w.diffuse = 1.0f - w.env - w.emit;
+            for_derivative = 1;
+        }
         float3 wo = -d;
         float4 u = rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_SCATTER);
         float3 wi = sample_mixture(s, &w, &q, sp.p, sp.n, wo, u);
@@ -108,7 +115,7 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
             vertex->wi = wi;
             vertex->inv_pdf = 1.0f / pdf;
         }
-        if (!(max3(beta) > 0.0f))
+        if (!(max3(beta) > 0.0f) && !for_derivative)
             break;
         o = x;
         d = wi;
