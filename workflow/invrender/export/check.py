@@ -5,7 +5,8 @@ usd-core 26 has no `UsdUtils.ComplianceChecker` any more: OpenUSD replaced it, a
 "USD Validation Framework"). `validate_usd` runs every validator registered in this build except
 those for usdz packages (our layers are not packages) and returns the errors, as usdchecker
 reports them; warnings are logged. docs/export.md also records the result of the older
-ComplianceChecker (usd-core 24.11) on the demo exports.
+ComplianceChecker (usd-core 25.5) on the demo exports. pyproject asks for usd-core 26.11: 24.11
+has no UsdValidation, and 25.5's wheel has it without its validator plugins (they fail to load).
 """
 
 from __future__ import annotations
