@@ -444,12 +444,14 @@ def scene_to_mitsuba(
     window_as_hole: bool = True,
     envmap_size=None,
     integrator: dict | None = None,
+    bsdf: dict | None = None,
 ) -> dict:
     """A dict for `mi.load_dict(..., parallel=False)` that renders `scene` as seen by `camera`.
 
     max_bounces is our B (Mitsuba max_depth = B + 1). Sets the Mitsuba variant (the mesh and
     texture objects in the dict belong to it). envmap_size = (width, height) of the lat-long
-    environment, by default `default_envmap_size(kg)`. `integrator` overrides the path integrator.
+    environment, by default `default_envmap_size(kg)`. `integrator` overrides the path integrator,
+    `bsdf` the milo BSDF of the maps (one instance, shared by every mesh).
     """
     set_variant(variant)
     maps, mesh = scene.maps, scene.mesh
@@ -461,7 +463,7 @@ def scene_to_mitsuba(
             stacklevel=2,
         )
 
-    bsdf = mi.load_dict(milo_bsdf(maps.kd, maps.ks, maps.ka))  # one instance shared by all meshes
+    bsdf = mi.load_dict(bsdf or milo_bsdf(maps.kd, maps.ks, maps.ka))  # one instance shared by all meshes
     out = {
         "type": "scene",
         "integrator": integrator
@@ -555,16 +557,8 @@ def scene_to_mitsuba_diffuse(scene: Scene, camera: Camera, max_bounces: int, spp
     if np.any(scene.maps.ks > 0):
         raise ValueError("scene_to_mitsuba_diffuse: maps.ks: expected 0 everywhere (a Lambertian scene), "
                          f"got a maximum of {float(scene.maps.ks.max())}")
-    out = scene_to_mitsuba(scene, camera, max_bounces, spp, variant, seed, window_as_hole, envmap_size, integrator)
-    groups = classify_faces(scene, window_as_hole)
-    bsdf = mi.load_dict(diffuse_bsdf(scene.maps.kd))
-    kept = ~groups["hole"]
-    mesh = scene.mesh
-    for name, mask, emits in (("surfaces", kept & ~groups["emitter"], False), ("emitters", kept & groups["emitter"], True)):
-        if name in out:
-            emitter = {"type": "area", "radiance": bitmap_texture(scene.maps.ke)} if emits else None
-            out[name] = mesh_object(mesh.positions, mesh.faces[mask], mesh.uvs, name, bsdf=bsdf, emitter=emitter)
-    return out
+    return scene_to_mitsuba(scene, camera, max_bounces, spp, variant, seed, window_as_hole, envmap_size, integrator,
+                            bsdf=diffuse_bsdf(scene.maps.kd))
 
 
 def kd_parameter(params) -> str:
