@@ -80,7 +80,7 @@ def loss(scene, room_, features, seed, proposal=None) -> float:
     return float((delta.astype(np.float64) * mean).sum())
 
 
-def central_difference(room_, features, name, index, h, seed, fixed_proposal=False, signs=(1, -1)) -> float:
+def finite_difference(room_, features, name, index, h, seed, fixed_proposal=False, signs=(1, -1)) -> float:
     values = []
     for sign in signs:
         scene = copy.deepcopy(room_[0])
@@ -94,7 +94,7 @@ def test_every_seed_matches_the_derivative_along_its_paths(room, gradients, name
     features, per_seed = gradients
     index, h = ALONG_PATHS[name]
     adjoint = np.array([g[name][index].sum() for g in per_seed])
-    finite = np.array([central_difference(room, features, name, index, h, s, fixed_proposal=True) for s in SEEDS])
+    finite = np.array([finite_difference(room, features, name, index, h, s, fixed_proposal=True) for s in SEEDS])
     assert np.all(np.abs(finite) > 0), (name, finite)
     np.testing.assert_allclose(adjoint, finite, rtol=0.02, err_msg=name)
 
@@ -108,7 +108,7 @@ def test_detached_sampling_is_unbiased_in_the_mean(room, gradients, case):
     name, black = case.split("-")[0], case.endswith("black")
     adjoint = np.array([g[name][index].sum() for g in per_seed])
     signs = (1, 0) if black else (1, -1)
-    finite = np.array([central_difference(room, features, name, index, h, s, signs=signs) for s in SEEDS])
+    finite = np.array([finite_difference(room, features, name, index, h, s, signs=signs) for s in SEEDS])
     noise = finite.std(ddof=1) / np.sqrt(len(SEEDS))
     tolerance = max(0.02 * abs(finite.mean()), 4 * noise)
     assert abs(adjoint.mean() - finite.mean()) <= tolerance, (name, adjoint.mean(), finite.mean(), noise)
