@@ -256,3 +256,6 @@ def _summary(scene: Scene, parts: list[Part], duplicates: Duplicates | None, lay
         "lights": [{"name": part.name, "faces": int(len(part.piece.faces)),
                     "mean_radiance": [round(float(v), 6) for v in part.radiance]} for part in parts if part.role == "light"],
     }
+
+
+run = export_usd  # the stage contract's entry point (stage.py:run); export_usd is the API's name
