@@ -17,6 +17,7 @@ include: "workflow/rules/synthesize.smk"
 include: "workflow/rules/cameras.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/gradients.smk"
+include: "workflow/rules/truth_scene.smk"
 include: "workflow/rules/features.smk"
 include: "workflow/rules/render.smk"
 include: "workflow/rules/export.smk"
@@ -24,6 +25,7 @@ include: "workflow/rules/export.smk"
 
 localrules:
     all,
+    truth_scene,
 
 
 rule all:

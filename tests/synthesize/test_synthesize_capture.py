@@ -55,7 +55,7 @@ def test_room_capture_layout(tmp_path):
         expected = fake.render(cam)
         np.testing.assert_array_equal(read_image(out / "images" / f"{stem}.exr"), expected["radiance"])
         assert (out / "images" / f"{stem}.png").is_file()
-        mask = read_mask(out / "masks" / f"{stem}.png")
+        mask = read_mask(out / "ground_truth" / "masks" / f"{stem}.png")
         assert mask.dtype == np.uint16
         np.testing.assert_array_equal(mask, expected["instance_id"])
     cams = read_colmap(out / "sparse")
@@ -76,6 +76,8 @@ def test_room_capture_layout(tmp_path):
     doc = json.loads((out / "ground_truth" / "scene" / "scene.json").read_text())
     assert doc["metadata"]["kind"] == "room"
     assert not (out / "ground_truth" / "poses.json").exists()
+    # The capture proper holds only what a user would bring: the true masks are truth.
+    assert sorted(p.name for p in out.iterdir()) == ["ground_truth", "images", "mesh.ply", "sparse"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture"]
 
 
@@ -91,7 +93,7 @@ def test_duplicates_capture_has_poses_and_object(tmp_path):
     f0, f1 = meta["copies"][1]["faces"]
     np.testing.assert_allclose(obj.positions[obj.faces] @ T[:3, :3].T + T[:3, 3],
                                scene.mesh.positions[scene.mesh.faces[f0:f1]], atol=1e-5)
-    assert read_mask(out / "masks" / "view_000.png").max() == 3
+    assert read_mask(out / "ground_truth" / "masks" / "view_000.png").max() == 3
 
 
 def test_failed_render_leaves_nothing(tmp_path):
@@ -122,7 +124,7 @@ def test_real_renderer_masks_match_the_mesh(tmp_path):
 
     metadata = synthesize("duplicates", tmp_path / "capture", SMALL_DUPLICATES, spp=4,
                           renderer_factory=lambda s: renderer)
-    np.testing.assert_array_equal(read_mask(tmp_path / "capture" / "masks" / "view_000.png"), ids)
+    np.testing.assert_array_equal(read_mask(tmp_path / "capture" / "ground_truth" / "masks" / "view_000.png"), ids)
     assert metadata["poses"] == meta["poses"]
 
 

@@ -79,7 +79,8 @@ def test_synthesize_writes_captures(built):
             assert image.shape == (HEIGHT, WIDTH, 3)
             assert np.isfinite(image).all() and (image >= 0).all() and image.mean() > 0
             assert exr.with_suffix(".png").is_file()
-            assert (capture / "masks" / f"{exr.stem}.png").is_file()
+            assert (capture / "ground_truth" / "masks" / f"{exr.stem}.png").is_file()
+        assert not (capture / "masks").exists()  # the true masks are truth, not user input
         assert colmap_image_names(capture / "sparse") == [exr.name for exr in exrs]
         assert (capture / "mesh.ply").stat().st_size > 0
         assert read_json(capture / "ground_truth/scene/scene.json")
@@ -87,6 +88,28 @@ def test_synthesize_writes_captures(built):
         assert (workdir / "results" / scene / "benchmarks/synthesize.tsv").is_file()
     poses = read_json(workdir / "results/cans/capture/ground_truth/poses.json")
     assert len(poses["instances"]) == 3
+
+
+def test_truth_scene_copies_the_ground_truth(built):
+    """results/{scene}/scene is the synthetic truth, byte for byte (and the true poses of the
+    duplicates), until the stage that recovers it lands."""
+    workdir, _ = built
+    result = snakemake(workdir, "--cores", "2", "results/room/scene", "results/cans/scene")
+    assert job_counts(result.stdout) == {"truth_scene": 2}
+    for scene in ("room", "cans"):
+        truth = workdir / "results" / scene / "capture" / "ground_truth"
+        copy = workdir / "results" / scene / "scene"
+        files = sorted(p.relative_to(truth / "scene") for p in (truth / "scene").rglob("*") if p.is_file())
+        assert "scene.json" in {str(f) for f in files} and len(files) > 3
+        for name in files:
+            assert (copy / name).read_bytes() == (truth / "scene" / name).read_bytes(), name
+        extra = {str(p.relative_to(copy)) for p in copy.rglob("*") if p.is_file()} - {str(f) for f in files}
+        extra.discard(".snakemake_timestamp")  # Snakemake's mark in every directory it outputs
+        assert extra == ({"poses.json"} if scene == "cans" else set())
+        assert (workdir / "results" / scene / "logs/truth_scene.log").read_text().count("->") >= len(files)
+        assert (workdir / "results" / scene / "benchmarks/truth_scene.tsv").is_file()
+    assert read_json(workdir / "results/cans/scene/poses.json") == read_json(
+        workdir / "results/cans/capture/ground_truth/poses.json")
 
 
 def test_cameras_normalises_colmap_and_transforms_json(built):
@@ -136,6 +159,7 @@ def test_geometry_simplifies_and_unwraps(built, test_config):
 
 def test_features_analyses_the_scene(built, test_config):
     workdir, _ = built
+    snakemake(workdir, "--cores", "2", "results/room/scene")  # upstream, if not built here yet
     result = snakemake(workdir, "--cores", "2", "results/room/features.json")
     assert job_counts(result.stdout) == {"features": 1}
     document = read_json(workdir / "results/room/features.json")
@@ -186,10 +210,11 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
     from invrender.export import validate_usd
 
     workdir, _ = built
+    snakemake(workdir, "--cores", "2", "results/room/scene", "results/cans/scene")  # upstream, if not built here yet
     result = snakemake(workdir, "--cores", "2", "-p", "results/room/export", "results/cans/export",
                        "--config", "export={usdc: true}")
     assert job_counts(result.stdout) == {"export": 2}
-    assert "--poses results/cans/capture/ground_truth/poses.json" in result.stdout
+    assert "--poses results/cans/scene/poses.json" in result.stdout
     for scene in ("room", "cans"):
         export = workdir / "results" / scene / "export"
         for layer in ("scene.usda", "scene.usdc"):
@@ -211,7 +236,10 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
 
 
 def test_user_capture_has_no_scene_to_render(built):
+    """A multiview capture gets cameras, geometry and gradients; its scene directory waits for
+    bake (issue 11), and asking for what reads it says so."""
     workdir, config = built
     result = snakemake(workdir, "-n", "results/mine/renders", config=config, check=False)
     assert result.returncode != 0
-    assert "'mine' is a capture" in result.stdout
+    assert "'mine' is a multiview capture of your own" in result.stdout
+    assert "bake (issue 11)" in result.stdout

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
 
-RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry",
-                  "gradients": "gradients", "features.json": "features", "renders": "render", "export": "export"}
+RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry", "gradients": "gradients",
+                  "scene": "truth_scene", "features.json": "features", "renders": "render", "export": "export"}
 OUTPUTS = tuple(RULE_OF_OUTPUT)
 
 
@@ -26,8 +26,8 @@ def complete(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("complete")
     result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "export": 2,
-        "all": 1,
+        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "truth_scene": 2, "features": 2, "render": 2,
+        "export": 2, "all": 1,
     }
     return workdir
 
@@ -42,8 +42,8 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
     override = tmp_path / "faces.yaml"
     override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    # Downstream of geometry only gradients reads it so far (features and render read the
-    # synthetic scene until the bake stage lands): nothing upstream runs again.
+    # Downstream of geometry only gradients reads it so far (features and render read
+    # truth_scene's copy of the synthetic truth until bake lands): nothing upstream runs again.
     assert job_counts(result.stdout) == {"geometry": 2, "gradients": 2, "all": 1}
     assert "Params have changed since last execution" in result.stdout
     # The same through --config, as one would type it.
@@ -105,7 +105,7 @@ def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
                                    start_new_session=True)
         try:
             deadline = time.monotonic() + 300
-            # features runs after the capture it reads: wait until one starts (its log appears).
+            # features runs after the capture and the scene it reads: wait until one starts.
             while not list(tmp_path.glob("results/*/logs/features.log")):
                 assert process.poll() is None, (tmp_path / "first.log").read_text()[-3000:]
                 assert time.monotonic() < deadline, "no features job started"

@@ -1,8 +1,10 @@
 """The workflow's frame, without running a job: lint, formatting, the demo's DAG, the config
-schema and its errors, the cluster profile, and the conda environments' pins."""
+schema, its generated documentation and its errors, the cluster profile, and the conda
+environments' pins. (The checks of each mode's captures are in test_modes.py.)"""
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -34,8 +36,8 @@ def test_snakefmt_check():
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "features": 2, "render": 2, "export": 2,
-        "all": 1,
+        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "truth_scene": 2, "features": 2, "render": 2,
+        "export": 2, "all": 1,
     }
 
 
@@ -44,7 +46,8 @@ def test_rulegraph_picture_is_current(tmp_path):
     result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
     rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
     svg = (REPO / "docs" / "rulegraph.svg").read_text()
-    assert rules == {"all", "synthesize", "cameras", "geometry", "gradients", "features", "render", "export"}
+    assert rules == {"all", "synthesize", "cameras", "geometry", "gradients", "truth_scene", "features", "render",
+                     "export"}
     for rule in rules:
         assert f">{rule}</text>" in svg
 
@@ -62,14 +65,38 @@ def _walk(schema, path="config"):
 
 def test_schema_documents_and_closes_every_key():
     schema = yaml.safe_load(SCHEMA.read_text())
-    readme = (REPO / "config" / "README.md").read_text()
     for path, node in _walk(schema):
         assert node.get("description"), f"{path}: no description"
         if "properties" in node:
             assert node.get("additionalProperties") is False, f"{path}: a typo'd key would pass"
-        key = path.rsplit(".", 1)[-1]
-        if key not in ("config", "<name>"):
-            assert f"`{key}`" in readme, f"config/README.md does not document {path}"
+    scene = schema["properties"]["scenes"]["additionalProperties"]["properties"]
+    modes = scene["mode"]["enum"]
+    assert set(scene["mode"]["x-stages"]) == set(modes)
+    for key, node in scene["capture"]["properties"].items():
+        assert set(node.get("x-modes", modes)) <= set(modes), key
+
+
+def _config_readme():
+    spec = importlib.util.spec_from_file_location("config_readme", REPO / "workflow" / "schemas" / "config_readme.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_config_readme_is_generated_from_the_schema():
+    """config/README.md is what the generator makes of the schema: every key once, with its type,
+    default and description, so that the two cannot drift apart."""
+    generator = _config_readme()
+    text = generator.render()
+    assert (REPO / "config" / "README.md").read_text() == text, "run python workflow/schemas/config_readme.py"
+    schema = yaml.safe_load(SCHEMA.read_text())
+    rows = re.findall(r"(?m)^\| `([^`]+)` \| ([^|]*) \| ([^|]*) \|", text)
+    assert [row[0] for row in rows[3:]] == [key for key, _, _ in generator.keys(schema)]  # after the 3 modes
+    documented = {key: (kind, default) for key, kind, default in rows}
+    assert documented["geometry.target_faces"] == ("integer, >= 4", "`20000`")
+    assert documented["scenes.<name>.capture.path"] == ("string", "required")
+    assert documented["scenes.<name>.mode"][0] == "`multiview` or `duplicates` or `room`"
+    assert "*room only.*" in text.split("`scenes.<name>.capture.depth`")[1].split("\n")[0]
 
 
 def test_demo_config_is_valid_and_complete():
@@ -78,6 +105,13 @@ def test_demo_config_is_valid_and_complete():
     demo = yaml.safe_load(DEMO_CONFIG.read_text())
     assert set(demo) == set(schema["properties"])
     assert {s["synthetic"]["kind"] for s in demo["scenes"].values()} == {"room", "duplicates"}
+
+
+def test_config_readme_generator_rejects_a_template_without_its_tables(tmp_path):
+    template = tmp_path / "template.md"
+    template.write_text("# Configuring\n\n{{keys}}\n")
+    with pytest.raises(ValueError, match="modes"):
+        _config_readme().render(template_path=template)
 
 
 BAD_CONFIGS = {
@@ -93,6 +127,15 @@ BAD_CONFIGS = {
     "missing capture": (
         {"scenes": {"kitchen": {"capture": {"path": "no/such/capture"}}}},
         ["'kitchen'", "scenes.kitchen.capture.path", "no/such/capture"],
+    ),
+    "unknown mode": ({"scenes": {"room": {"mode": "panorama", "synthetic": {"kind": "room"}}}}, ["panorama"]),
+    "mode against the generator's kind": (
+        {"scenes": {"cans": {"mode": "room", "synthetic": {"kind": "duplicates"}}}},
+        ["'cans'", "scenes.cans.mode", "'room'", "'duplicates'"],
+    ),
+    "synthetic and capture at once": (
+        {"scenes": {"room": {"synthetic": {"kind": "room"}, "capture": {"path": "."}}}},
+        ["is valid under each of"],
     ),
 }
 
@@ -146,7 +189,8 @@ def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
     result = snakemake(tmp_path, *args)
     resources = _resources_by_rule(result.stdout)
     resources.pop("all", None)
-    assert set(resources) == {"synthesize", "cameras", "geometry", "gradients", "features", "render", "export"}
+    assert set(resources) == {"synthesize", "cameras", "geometry", "gradients", "truth_scene", "features", "render",
+                              "export"}
     for rule, line in resources.items():
         assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line
         if rule in RAY_TRACING_RULES:

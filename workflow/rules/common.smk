@@ -1,8 +1,9 @@
 """Configuration checks and the input functions every rule shares.
 
 The config is validated against workflow/schemas/config.schema.yaml (defaults filled in), then
-checked against the file system: a capture that is not there stops the workflow here, before
-any job runs, with one message naming the scene, the key and the path.
+each scene's mode is settled and checked against the file system: a capture that lacks what its
+mode needs, or names a file that is not there, stops the workflow here, before any job runs,
+with one message naming the scene, the key and the path.
 """
 
 import json
@@ -16,6 +17,7 @@ from pathlib import Path
 import yaml
 
 from snakemake.exceptions import WorkflowError
+from snakemake.logging import logger
 from snakemake.utils import validate
 
 SCHEMA = "../schemas/config.schema.yaml"
@@ -54,7 +56,8 @@ def coerce_strings(value, schema):
 
 
 with open(workflow.source_path(SCHEMA)) as _schema:
-    coerce_strings(config, yaml.safe_load(_schema))
+    CONFIG_SCHEMA = yaml.safe_load(_schema)
+coerce_strings(config, CONFIG_SCHEMA)
 validate(config, schema=SCHEMA)
 
 # `.venv/bin/snakemake` run without activating the venv: the jobs' `invrender` is the one
@@ -68,10 +71,25 @@ if shutil.which("invrender") is None and os.path.exists(
 os.environ.setdefault("INVRENDER_SOURCE", workflow.basedir)
 
 SCENES = config["scenes"]
+_SCENE_SCHEMA = CONFIG_SCHEMA["properties"]["scenes"]["additionalProperties"]
+# Which modes take each capture key (the schema's `x-modes`), and what each mode builds once its
+# stages land (`x-stages`): the schema says both, for the docs and for the messages here.
+CAPTURE_KEYS = _SCENE_SCHEMA["properties"]["capture"]["properties"]
+MODE_STAGES = _SCENE_SCHEMA["properties"]["mode"]["x-stages"]
+# The capture each generator kind makes. (Issue 16's rooms will make `room` captures as well:
+# one photograph with depth and segmentation.)
+KIND_MODE = {"room": "multiview", "duplicates": "duplicates"}
+# Image files a capture's images/ may hold, the preferred first: an EXR before its PNG preview.
+IMAGE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
+MESH_NAMES = ("mesh.ply", "mesh.obj")
 
 
 def is_synthetic(scene):
     return "synthetic" in SCENES[scene]
+
+
+def mode(scene):
+    return SCENES[scene]["mode"]
 
 
 SYNTHETIC = [name for name in SCENES if is_synthetic(name)]
@@ -83,6 +101,28 @@ wildcard_constraints:
 
 
 # ---------------------------------------------------------------------------- checks
+
+
+def _refuse(name, key, message):
+    raise WorkflowError(f"config: scene {name!r}: scenes.{name}.{key}: {message}")
+
+
+def _settle_mode(name):
+    """Write the scene's mode into its config: a synthetic scene's follows its generator kind
+    (set, it must agree), a capture's defaults to multiview."""
+    scene = SCENES[name]
+    if not is_synthetic(name):
+        scene.setdefault("mode", "multiview")
+        return
+    kind = scene["synthetic"]["kind"]
+    made = KIND_MODE[kind]
+    if scene.setdefault("mode", made) != made:
+        _refuse(
+            name,
+            "mode",
+            f"{scene['mode']!r} disagrees with synthetic.kind {kind!r}, whose capture is "
+            f"{made} (leave mode out, or set it to {made!r})",
+        )
 
 
 def _check_generator_config(name):
@@ -114,26 +154,158 @@ def cameras_file(capture):
     return None
 
 
-def _check_capture(name):
-    path = SCENES[name]["capture"]["path"]
-    key = f"scenes.{name}.capture.path"
-    if not Path(path).is_dir():
-        raise WorkflowError(
-            f"config: scene {name!r}: {key}: capture directory {path!r} does not exist "
-            f"(relative paths are relative to the working directory {os.getcwd()})"
+def capture_mesh(capture):
+    """A capture's mesh or point cloud: the one `mesh` names, else mesh.ply or mesh.obj in it;
+    None if there is none."""
+    if "mesh" in capture:
+        return str(Path(capture["path"], capture["mesh"]))
+    for name in MESH_NAMES:
+        if Path(capture["path"], name).is_file():
+            return str(Path(capture["path"], name))
+    return None
+
+
+def photographs(folder):
+    """The images in ``folder``, one per stem (an EXR before its PNG preview), sorted."""
+    found = {}
+    for path in sorted(Path(folder).iterdir()) if Path(folder).is_dir() else ():
+        suffix = path.suffix.lower()
+        if suffix not in IMAGE_SUFFIXES or not path.is_file():
+            continue
+        best = found.get(path.stem)
+        if best is None or IMAGE_SUFFIXES.index(suffix) < IMAGE_SUFFIXES.index(
+            best.suffix.lower()
+        ):
+            found[path.stem] = path
+    return [found[stem] for stem in sorted(found)]
+
+
+def _named_file(name, key, suffixes, folder=False):
+    """The file (or, with ``folder``, file or folder) that capture key ``key`` ('depth',
+    'segmentation.ids') names, relative to the capture directory; refused if it is not there
+    or not of one of ``suffixes``."""
+    capture = SCENES[name]["capture"]
+    value = capture
+    for part in key.split("."):
+        value = value[part]
+    path = Path(capture["path"], value)
+    if not (path.is_file() or (folder and path.is_dir())):
+        _refuse(
+            name,
+            f"capture.{key}",
+            f"{str(path)!r} does not exist (a relative path is relative to the capture "
+            f"directory, scenes.{name}.capture.path)",
         )
-    if not Path(path, "mesh.ply").is_file():
-        raise WorkflowError(
-            f"config: scene {name!r}: {key}: {path!r} has no mesh.ply "
-            "(a mesh, or a point cloud with normals)"
+    if path.is_file() and path.suffix.lower() not in suffixes:
+        _refuse(
+            name, f"capture.{key}", f"{str(path)!r}: expected {' or '.join(suffixes)}"
+        )
+    return path
+
+
+def _check_multiview(name, capture):
+    """A mesh or point cloud, cameras and images."""
+    path = capture["path"]
+    if "mesh" in capture:
+        _named_file(name, "mesh", (".ply", ".obj"))
+    elif capture_mesh(capture) is None:
+        _refuse(
+            name,
+            "capture.mesh",
+            f"not set, and {path!r} has neither mesh.ply nor mesh.obj: a multiview scene "
+            "needs a mesh, or a point cloud with normals (PLY or OBJ)",
         )
     if cameras_file(path) is None:
-        raise WorkflowError(
-            f"config: scene {name!r}: {key}: {path!r} has no cameras: expected sparse/ "
-            "(a COLMAP model: cameras and images, .txt or .bin) or transforms.json"
+        _refuse(
+            name,
+            "capture.path",
+            f"{path!r} has no cameras: expected sparse/ (a COLMAP model: cameras and "
+            "images, .txt or .bin) or transforms.json",
+        )
+    if not photographs(Path(path, "images")):
+        _refuse(
+            name,
+            "capture.path",
+            f"{str(Path(path, 'images'))!r} holds no images (EXR, PNG or JPEG)",
         )
 
 
+def _check_photograph(name, capture):
+    """One photograph, and its cameras at most one way (a model, or a field of view)."""
+    path = capture["path"]
+    if "image" in capture:
+        _named_file(name, "image", IMAGE_SUFFIXES)
+    else:
+        images = photographs(Path(path, "images"))
+        if len(images) != 1:
+            names = ", ".join(p.name for p in images[:5]) or "none"
+            _refuse(
+                name,
+                "capture.image",
+                f"not set, and {str(Path(path, 'images'))!r} holds {len(images)} images "
+                f"({names}), not one: a {mode(name)} scene is one photograph; name it",
+            )
+    given = [key for key in ("field_of_view", "focal_length") if key in capture]
+    if len(given) == 2:
+        _refuse(
+            name, "capture.focal_length", "give field_of_view or focal_length, not both"
+        )
+    if given and cameras_file(path) is not None:
+        _refuse(
+            name,
+            f"capture.{given[0]}",
+            f"{path!r} has cameras ({cameras_file(path)}) as well: give one of them",
+        )
+
+
+def _check_duplicates(name, capture):
+    _check_photograph(name, capture)
+    if "masks" in capture:
+        masks = _named_file(name, "masks", (".png",), folder=True)
+        if masks.is_dir() and not any(masks.glob("*.png")):
+            _refuse(name, "capture.masks", f"{str(masks)!r} holds no PNG")
+
+
+def _check_room(name, capture):
+    _check_photograph(name, capture)
+    if "depth" in capture:
+        _named_file(name, "depth", (".exr",))
+    if "segmentation" in capture:
+        _named_file(name, "segmentation.ids", (".png",))
+        _named_file(name, "segmentation.labels", (".json", ".csv"))
+
+
+MODE_CHECKS = {
+    "multiview": _check_multiview,
+    "duplicates": _check_duplicates,
+    "room": _check_room,
+}
+
+
+def _check_capture(name):
+    capture = SCENES[name]["capture"]
+    path = capture["path"]
+    if not Path(path).is_dir():
+        _refuse(
+            name,
+            "capture.path",
+            f"capture directory {path!r} does not exist "
+            f"(relative paths are relative to the working directory {os.getcwd()})",
+        )
+    for key in capture:
+        modes = CAPTURE_KEYS[key].get("x-modes")
+        if modes and mode(name) not in modes:
+            _refuse(
+                name,
+                f"capture.{key}",
+                f"a {mode(name)} scene takes no {key} (it is for {' and '.join(modes)} "
+                f"scenes; scenes.{name}.mode sets the mode)",
+            )
+    MODE_CHECKS[mode(name)](name, capture)
+
+
+for _name in SCENES:
+    _settle_mode(_name)
 for _name in SYNTHETIC:
     _check_generator_config(_name)
 for _name in CAPTURES:
@@ -143,21 +315,51 @@ for _name in CAPTURES:
 # ---------------------------------------------------------------------------- targets
 
 
+def has_cameras(scene):
+    if is_synthetic(scene):
+        return True
+    return cameras_file(SCENES[scene]["capture"]["path"]) is not None
+
+
+def has_mesh(scene):
+    """A synthetic capture has mesh.ply whatever its mode; of the users' captures, multiview
+    ones (checked above)."""
+    return is_synthetic(scene) or mode(scene) == "multiview"
+
+
 def scene_targets(scene):
-    """Every artifact the workflow makes for one scene (what `rule all` asks for)."""
-    targets = [
-        f"results/{scene}/cameras",
-        f"results/{scene}/geometry",
-        f"results/{scene}/gradients",
-    ]
+    """The targets of `all`: each artifact whose stage exists and whose inputs the scene
+    has. Only a synthetic scene has a scene directory (truth_scene's copy of its ground
+    truth) until the stages that recover one land, so only it gets features, renders, export.
+    """
+    results = f"results/{scene}"
+    targets = [f"{results}/capture"] if is_synthetic(scene) else []
+    if has_cameras(scene):
+        targets.append(f"{results}/cameras")
+    if has_mesh(scene):
+        targets += [f"{results}/geometry", f"{results}/gradients"]
     if is_synthetic(scene):
         targets += [
-            f"results/{scene}/capture",
-            f"results/{scene}/features.json",
-            f"results/{scene}/renders",
-            f"results/{scene}/export",
+            f"{results}/scene",
+            f"{results}/features.json",
+            f"{results}/renders",
+            f"{results}/export",
         ]
     return targets
+
+
+def planned(scene):
+    """What the scene's mode will build once its stages land, as plain text."""
+    text = MODE_STAGES[mode(scene)]["planned"].replace("`", "")
+    return text.replace("{scene}", scene)
+
+
+for _name in CAPTURES:
+    logger.info(
+        f"scene {_name!r} ({mode(_name)}, a capture of your own): builds "
+        f"{', '.join(scene_targets(_name)) or 'nothing yet'}; once its stages land, "
+        f"{planned(_name)}"
+    )
 
 
 # ---------------------------------------------------------------------------- input functions
@@ -183,10 +385,37 @@ def capture_path(name):
     return function
 
 
+def _lacks(wildcards, what):
+    scene = wildcards.scene
+    raise WorkflowError(
+        f"scene {scene!r} is a {mode(scene)} capture without {what}; once its stages land, "
+        f"{planned(scene)}"
+    )
+
+
+def geometry_mesh(wildcards):
+    """The mesh that geometry reads (a synthetic capture's mesh.ply, or the user's)."""
+    if is_synthetic(wildcards.scene):
+        return os.path.join(capture_dir(wildcards), "mesh.ply")
+    if not has_mesh(wildcards.scene):
+        _lacks(wildcards, "a mesh (the geometry rule's input)")
+    return capture_mesh(SCENES[wildcards.scene]["capture"])
+
+
+def geometry_mesh_input(wildcards):
+    if is_synthetic(wildcards.scene):
+        return capture_dir(wildcards)
+    return geometry_mesh(wildcards)
+
+
 def capture_cameras(wildcards):
     """The capture's cameras: a COLMAP model directory or a transforms.json file."""
     if is_synthetic(wildcards.scene):
         return os.path.join(capture_dir(wildcards), "sparse")
+    if not has_cameras(wildcards.scene):
+        _lacks(
+            wildcards, "cameras (sparse/ or transforms.json, the cameras rule's input)"
+        )
     return os.path.join(capture_dir(wildcards), cameras_file(capture_dir(wildcards)))
 
 
@@ -196,23 +425,28 @@ def capture_cameras_input(wildcards):
     return capture_cameras(wildcards)
 
 
-def scene_dir(wildcards):
-    """The scene directory (scene.json) that features, render and export read. Until the
-    bake stage exists that is the synthetic scene's ground truth; swap it here for
-    results/{scene}/scene.
+def synthetic_capture(wildcards):
+    """truth_scene's input: the synthetic capture whose ground_truth/ it copies. A capture of
+    the user's own has no truth: its scene directory waits for the stage that recovers it.
     """
-    if not is_synthetic(wildcards.scene):
+    scene = wildcards.scene
+    if not is_synthetic(scene):
         raise WorkflowError(
-            f"scene {wildcards.scene!r} is a capture: features, render and export need a scene "
-            "directory, which only synthetic scenes have until the bake stage exists"
+            f"scene {scene!r} is a {mode(scene)} capture of your own: nothing writes "
+            f"results/{scene}/scene/ yet (truth_scene copies the ground truth of synthetic "
+            f"scenes only); once its stages land, {planned(scene)}"
         )
-    return f"results/{wildcards.scene}/capture/ground_truth/scene"
+    return capture_dir(wildcards)
 
 
-def scene_input(wildcards):
-    """The output that holds scene_dir(wildcards): what features, render and export depend on."""
-    scene_dir(wildcards)
-    return f"results/{wildcards.scene}/capture"
+def truth_files(wildcards):
+    """What truth_scene copies into results/{scene}/scene/: the true scene directory's
+    contents, and for duplicates the true poses of the copies."""
+    truth = os.path.join(synthetic_capture(wildcards), "ground_truth")
+    files = [os.path.join(truth, "scene", ".")]
+    if mode(wildcards.scene) == "duplicates":
+        files.append(os.path.join(truth, "poses.json"))
+    return files
 
 
 # ---------------------------------------------------------------------------- params
@@ -253,24 +487,16 @@ def geometry_options(wildcards):
     )
 
 
-def scene_poses(wildcards):
-    """The poses of a duplicates scene's copies (DESIGN.md: duplicates/poses.json): the
-    synthetic scene's truth until the duplicates stage writes its own."""
-    synthetic = SCENES[wildcards.scene].get("synthetic", {})
-    if synthetic.get("kind") == "duplicates":
-        return f"results/{wildcards.scene}/capture/ground_truth/poses.json"
-    return None
-
-
 def export_options(wildcards):
-    """invrender export's flags: --usdc, --no-instancing, and the poses of duplicates."""
+    """invrender export's flags: --usdc, --no-instancing, and the poses of duplicates, which the
+    scene directory holds beside scene.json."""
     options = []
     if config["export"]["usdc"]:
         options.append("--usdc")
     if not config["export"]["instancing"]:
         options.append("--no-instancing")
-    poses = scene_poses(wildcards)
-    if poses:
+    if mode(wildcards.scene) == "duplicates":  # the poses of its copies (DESIGN.md)
+        poses = f"results/{wildcards.scene}/scene/poses.json"
         options.append(f"--poses {shlex.quote(poses)}")
     return " ".join(options)
 

@@ -3,7 +3,7 @@ rule export:
     meshes, UsdPreviewSurface materials, UsdLux lights, cameras and native instancing of
     duplicates, checked by the validators usdchecker runs; export.json summarises it."""
     input:
-        scene=scene_input,
+        scene="results/{scene}/scene",
     output:
         report(
             directory("results/{scene}/export"),
@@ -23,7 +23,6 @@ rule export:
         mem_mb=2000,
         runtime=10,
     params:
-        scene=scene_dir,
         options=export_options,
     shell:
-        "invrender --log {log} export {params.scene} --out {output} {params.options}"
+        "invrender --log {log} export {input.scene} --out {output} {params.options}"

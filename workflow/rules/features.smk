@@ -2,7 +2,7 @@ rule features:
     """Which effects the scene calls for (specular lobe, emission, environment, bounce count):
     the kernels' build flags, with the evidence behind each choice."""
     input:
-        scene_input,
+        "results/{scene}/scene",
     output:
         report(
             "results/{scene}/features.json",
@@ -22,10 +22,9 @@ rule features:
         runtime=10,
         gpu=gpu_request,
     params:
-        scene=scene_dir,
         analysis=analysis_options,
         overrides=feature_overrides,
         device=device_option,
     shell:
-        "invrender --log {log} features {params.scene} --out {output} {params.analysis}"
+        "invrender --log {log} features {input} --out {output} {params.analysis}"
         " {params.overrides} {params.device}"

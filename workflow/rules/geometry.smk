@@ -2,7 +2,7 @@ rule geometry:
     """The capture's mesh (or point cloud) cleaned, simplified and unwrapped: mesh.ply,
     atlas.npz (xatlas UVs, texel -> surface point and normal) and geometry.json."""
     input:
-        mesh=capture_path("mesh.ply"),
+        mesh=geometry_mesh_input,
     output:
         report(
             directory("results/{scene}/geometry"),
@@ -22,7 +22,7 @@ rule geometry:
         mem_mb=4000,
         runtime=30,
     params:
-        mesh=lambda wildcards: os.path.join(capture_dir(wildcards), "mesh.ply"),
+        mesh=geometry_mesh,
         options=geometry_options,
     shell:
         "invrender --log {log} geometry {params.mesh:q} --out {output} {params.options}"

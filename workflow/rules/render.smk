@@ -2,7 +2,7 @@ rule render:
     """Every camera of the scene rendered with the scene's features: EXR, PNG preview, and the
     depth, normal, UV, instance and triangle AOVs."""
     input:
-        scene=scene_input,
+        scene="results/{scene}/scene",
         features="results/{scene}/features.json",
     output:
         report(
@@ -25,10 +25,9 @@ rule render:
         runtime=60,
         gpu=gpu_request,
     params:
-        scene=scene_dir,
         spp=config["render"]["spp"],
         seed=config["render"]["seed"],
         device=device_option,
     shell:
-        "invrender --log {log} render {params.scene} --features {input.features}"
+        "invrender --log {log} render {input.scene} --features {input.features}"
         " --out {output} --spp {params.spp} --seed {params.seed} {params.device}"

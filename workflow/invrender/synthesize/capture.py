@@ -5,10 +5,15 @@
       images/<view>.png       sRGB previews
       sparse/                 COLMAP text model of the cameras (world-to-camera, OpenCV axes)
       mesh.ply                geometry only (no UVs): the mesh a scanner would give
-      masks/<view>.png        uint16 instance ids from the renderer's instance-id AOV (0 = none)
       ground_truth/scene/     the scene directory (write_scene): mesh with UVs, maps, cameras
+      ground_truth/masks/<view>.png  true instance ids from the renderer's instance-id AOV
+                              (uint16, 0 = none)
       ground_truth/poses.json duplicates only: true T_obj2world per instance (DESIGN.md form)
       ground_truth/object.ply duplicates only: the shared object mesh in its own frame
+
+Everything outside ground_truth/ stands for what a user brings; only an evaluation reads
+ground_truth/. The true masks are truth (a user's masks come from a segmentation tool), so they
+live there: a test that wants them as a provided segmentation copies them out.
 
 The directory is built beside ``out_dir`` and renamed into place only when complete.
 """
@@ -71,8 +76,9 @@ def write_capture(
     renderer = (renderer_factory or _default_renderer)(scene)
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
+        masks = tmp / "ground_truth" / "masks"
         (tmp / "images").mkdir()
-        (tmp / "masks").mkdir()
+        masks.mkdir(parents=True)
         for cam in tqdm(scene.cameras, desc="capture", unit="view"):
             out = renderer.render(cam, spp=spp, seed=seed)
             for key, tail in AOV_SHAPES.items():
@@ -88,7 +94,7 @@ def write_capture(
             stem = _stem(cam.name)
             write_exr(tmp / "images" / f"{stem}.exr", radiance)
             write_png_preview(tmp / "images" / f"{stem}.png", radiance)
-            write_mask(tmp / "masks" / f"{stem}.png", ids.astype(np.uint16))
+            write_mask(masks / f"{stem}.png", ids.astype(np.uint16))
         write_colmap(tmp / "sparse", [_exr_named(c) for c in scene.cameras])
         write_ply(tmp / "mesh.ply", _scan_mesh(scene.mesh))
         truth = tmp / "ground_truth"

@@ -1,0 +1,126 @@
+"""A mode per scene: what a capture of each mode must hold, checked when the workflow starts
+(before any job, one message naming the scene, the key and the path), and what `all` asks for
+in each mode. Dry runs on captures laid out in a temporary directory: the files are empty, since
+the checks look at what is there, not inside (the stages that read the files check those)."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+from workflow_helpers import job_counts, snakemake
+
+COLMAP = ["sparse/cameras.txt", "sparse/images.txt"]
+
+
+def lay_out(root, files):
+    """Empty files (and the folders they are in) at the given paths under ``root``."""
+    for name in files:
+        path = root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.touch()
+
+
+def dry_run(tmp_path, scenes, *targets, check=True):
+    """`snakemake -n` with only ``scenes`` in the config."""
+    config = tmp_path / "scenes.yaml"
+    config.write_text(yaml.safe_dump({"scenes": scenes}))
+    return snakemake(tmp_path, "-n", *targets, config=config, check=check)
+
+
+def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
+    """One photograph (with masks, or with depth and a segmentation, or nothing else) is a valid
+    duplicates or room capture; without cameras nothing can run yet, and the workflow says
+    what each will get once its stages land."""
+    lay_out(tmp_path, [
+        "shelf/images/IMG_0001.jpg", "shelf/masks.png",
+        "boxes/images/a.exr", "boxes/images/a.png", "boxes/masks/1.png", "boxes/masks/2.png",
+        "tins/images/one.jpg", "tins/images/two.jpg",
+        "living/images/photo.exr", "living/depth.exr", "living/panoptic.png", "living/labels.json",
+        "bare/images/photo.png",
+    ])
+    scenes = {
+        "shelf": {"mode": "duplicates", "capture": {"path": "shelf", "masks": "masks.png", "field_of_view": 60}},
+        "boxes": {"mode": "duplicates", "capture": {"path": "boxes", "masks": "masks", "focal_length": 900}},
+        "tins": {"mode": "duplicates", "capture": {"path": "tins", "image": "images/two.jpg"}},
+        "living": {"mode": "room", "capture": {
+            "path": "living", "depth": "depth.exr", "field_of_view": 70,
+            "segmentation": {"ids": "panoptic.png", "labels": "labels.json"}}},
+        "bare": {"mode": "room", "capture": {"path": "bare"}},
+    }
+    result = dry_run(tmp_path, scenes)
+    assert job_counts(result.stdout) == {"all": 1}
+    assert "scene 'shelf' (duplicates, a capture of your own): builds nothing yet" in result.stdout
+    assert "segment, duplicates and the shared mesh (issue 13)" in result.stdout
+    assert "scene 'living' (room, a capture of your own): builds nothing yet" in result.stdout
+    assert "(issue 16) build results/living/scene/" in result.stdout
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_photograph_with_cameras_gets_the_cameras_rule_and_no_more(tmp_path):
+    lay_out(tmp_path, ["shelf/images/IMG_0001.jpg", *(f"shelf/{name}" for name in COLMAP)])
+    scenes = {"shelf": {"mode": "duplicates", "capture": {"path": "shelf"}}}
+    assert job_counts(dry_run(tmp_path, scenes).stdout) == {"cameras": 1, "all": 1}
+    # What needs a mesh or a scene directory says which stage will bring it.
+    for target, expected in [("results/shelf/geometry", "without a mesh"),
+                             ("results/shelf/renders", "nothing writes results/shelf/scene/ yet")]:
+        result = dry_run(tmp_path, scenes, target, check=False)
+        assert result.returncode != 0
+        assert f"scene 'shelf' is a duplicates capture" in result.stdout and expected in result.stdout
+        assert "(issue 13)" in result.stdout
+
+
+def test_a_multiview_capture_gets_cameras_geometry_and_gradients(tmp_path):
+    """The default mode of a capture; an OBJ mesh does as well as mesh.ply."""
+    lay_out(tmp_path, ["kitchen/images/v0.png", "kitchen/mesh.obj", *(f"kitchen/{name}" for name in COLMAP)])
+    result = dry_run(tmp_path, {"kitchen": {"capture": {"path": "kitchen"}}}, "-p")
+    assert job_counts(result.stdout) == {"cameras": 1, "geometry": 1, "gradients": 1, "all": 1}
+    assert "geometry kitchen/mesh.obj --out results/kitchen/geometry" in result.stdout
+
+
+MULTIVIEW = ["images/v0.exr", *COLMAP]
+PHOTOGRAPH = ["images/photo.jpg"]
+
+# name: (files under kitchen/, the scene's config, texts the message must hold)
+BAD_CAPTURES = {
+    "a multiview scene without a mesh": (
+        MULTIVIEW, {"mode": "multiview"}, ["scenes.kitchen.capture.mesh", "neither mesh.ply nor mesh.obj"]),
+    "a named mesh that is not there": (
+        MULTIVIEW, {"mesh": "scans/room.ply"}, ["scenes.kitchen.capture.mesh", "kitchen/scans/room.ply"]),
+    "a multiview scene without images": (
+        ["mesh.ply", *COLMAP], {}, ["scenes.kitchen.capture.path", "kitchen/images", "no images"]),
+    "a photograph among several, unnamed": (
+        ["images/a.jpg", "images/b.exr", "images/b.png"], {"mode": "duplicates"},
+        ["scenes.kitchen.capture.image", "kitchen/images", "2 images"]),
+    "masks that are not there": (
+        PHOTOGRAPH, {"mode": "duplicates", "masks": "masks.png"}, ["scenes.kitchen.capture.masks", "kitchen/masks.png"]),
+    "a masks folder without a PNG": (
+        [*PHOTOGRAPH, "masks/readme.txt"], {"mode": "duplicates", "masks": "masks"},
+        ["scenes.kitchen.capture.masks", "kitchen/masks", "no PNG"]),
+    "a key of another mode": (
+        [*PHOTOGRAPH, "depth.exr"], {"mode": "duplicates", "depth": "depth.exr"},
+        ["scenes.kitchen.capture.depth", "a duplicates scene takes no depth", "room"]),
+    "a depth map that is no EXR": (
+        [*PHOTOGRAPH, "depth.png"], {"mode": "room", "depth": "depth.png"}, ["scenes.kitchen.capture.depth", ".exr"]),
+    "a segmentation without its labels": (
+        [*PHOTOGRAPH, "panoptic.png"], {"mode": "room", "segmentation": {"ids": "panoptic.png", "labels": "labels.json"}},
+        ["scenes.kitchen.capture.segmentation.labels", "kitchen/labels.json"]),
+    "a field of view beside a COLMAP model": (
+        [*PHOTOGRAPH, *COLMAP], {"mode": "room", "field_of_view": 60}, ["scenes.kitchen.capture.field_of_view", "sparse"]),
+    "a field of view and a focal length": (
+        PHOTOGRAPH, {"mode": "room", "field_of_view": 60, "focal_length": 500},
+        ["scenes.kitchen.capture.focal_length", "not both"]),
+}
+
+
+@pytest.mark.parametrize("name", BAD_CAPTURES)
+def test_bad_capture_is_refused_naming_scene_key_and_path(tmp_path, name):
+    files, settings, expected = BAD_CAPTURES[name]
+    lay_out(tmp_path / "kitchen", files)
+    capture = {"path": "kitchen", **{k: v for k, v in settings.items() if k != "mode"}}
+    scene = {"capture": capture, **({"mode": settings["mode"]} if "mode" in settings else {})}
+    result = dry_run(tmp_path, {"kitchen": scene}, check=False)
+    assert result.returncode != 0
+    assert "config: scene 'kitchen': " in result.stdout, result.stdout[-2000:]
+    for text in expected:
+        assert text in result.stdout, result.stdout[-2000:]
+    assert not (tmp_path / "results").exists()
