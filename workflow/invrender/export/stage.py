@@ -29,13 +29,14 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdRender, UsdShade
 from ..scene.atomic import atomic_dir
 from ..scene.format import load_scene, read_scene_json
 from ..scene.images import write_exr
+from ..scene.poses import read_poses, validate_poses
 from ..scene.regions import classify_faces
 from ..scene.types import Scene, SceneError
 from . import schema
 from .cameras import author_camera, author_render_product
 from .check import validate_usd
 from .geometry import MeshPiece, author_mesh, connected_faces, piece_of, write_indices
-from .instancing import Duplicates, check_poses, find_duplicates, read_poses
+from .instancing import Duplicates, find_duplicates
 from .lights import author_dome, author_mesh_light, cube_to_latlong, mean_radiance
 from .materials import TEXTURES, author_material, write_textures
 
@@ -188,9 +189,9 @@ def write_stage(path: Path, scene: Scene, parts: list[Part], duplicates: Duplica
 
 def _poses_of(poses_path, metadata: dict, where) -> list[dict]:
     if poses_path is not None:
-        return check_poses(read_poses(poses_path), poses_path)
+        return validate_poses(read_poses(poses_path), poses_path)
     if isinstance(metadata, dict) and "poses" in metadata:
-        return check_poses(metadata["poses"], Path(where) / "scene.json")
+        return validate_poses(metadata["poses"], Path(where) / "scene.json")
     return []
 
 
