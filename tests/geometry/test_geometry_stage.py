@@ -9,8 +9,8 @@ import pymeshlab
 import pytest
 
 from invrender.cli import main
-from invrender.geometry.atlas import AtlasTexels, dilate, texel_index
-from invrender.geometry.stage import run_geometry
+from invrender.scene.atlas import AtlasTexels, dilate, texel_index
+from invrender.geometry.stage import run
 from invrender.scene.mesh_io import read_mesh
 from rooms import ROOM, sample_room
 from invrender.scene.types import SceneError
@@ -38,7 +38,7 @@ def stage_output(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("geometry")
     source = room_cloud(tmp / "room.ply", 15_000, np.random.default_rng(0))
     out = tmp / "out"
-    report = run_geometry(source, out, target_faces=5000, atlas_resolution=512, poisson_depth=7, threads=1,
+    report = run(source, out, target_faces=5000, atlas_resolution=512, poisson_depth=7, threads=1,
                           progress=False)
     print(f"\nstage timings: {report['timings_s']}")
     return out, report
@@ -130,7 +130,7 @@ def test_refusals_leave_no_output(tmp_path, kind):
         field = "vertex positions" if kind == "nan" else "faces"
     out = tmp_path / "results" / "geometry"
     with pytest.raises(SceneError) as error:
-        run_geometry(source, out, progress=False)
+        run(source, out, progress=False)
     assert (error.value.file, error.value.field) == (str(source), field)
     assert not out.exists() and not (tmp_path / "results").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ply"]
@@ -140,7 +140,7 @@ def test_all_degenerate_mesh_is_refused_after_cleaning(tmp_path):
     source = tmp_path / "flat.obj"
     source.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")  # one zero-area triangle
     with pytest.raises(SceneError) as error:
-        run_geometry(source, tmp_path / "out", progress=False)
+        run(source, tmp_path / "out", progress=False)
     assert (error.value.file, error.value.field) == (str(source), "faces")
     assert "zero_area_faces" in error.value.expected
     assert not (tmp_path / "out").exists()
@@ -160,7 +160,7 @@ def test_failure_midway_keeps_the_previous_output(tmp_path, monkeypatch):
 
     monkeypatch.setattr(stage, "rasterize_atlas", broken)
     with pytest.raises(RuntimeError):
-        run_geometry(source, out, atlas_resolution=64, progress=False)
+        run(source, out, atlas_resolution=64, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "sphere.ply"]
     assert [p.name for p in out.iterdir()] == ["old.txt"]
 

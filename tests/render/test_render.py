@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from testscenes import box_room, hard_room, inside_sphere, look_at_camera, sphere_in_sky
 
-from invrender.render.features import AnalysisSettings, Features, analyse_scene
+from invrender.render.analysis import AnalysisSettings, analyse_scene
+from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
 
 DIFFUSE_ONLY = dict(specular=False, emission=True, emitter_sampling=True, environment=False, window=False,

@@ -9,7 +9,7 @@ from invrender.scene.cameras import read_colmap
 from invrender.scene.format import load_scene
 from invrender.scene.images import read_image, read_mask
 from invrender.scene.mesh_io import read_mesh
-from invrender.synthesize import make_duplicates, make_room, synthesize, write_capture
+from invrender.synthesize import make_duplicates, make_room, run as synthesize, write_capture
 
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
 SMALL_DUPLICATES = {"count": 3, "atlas_resolution": 64, "camera": {"width": 48, "height": 36}}
@@ -109,9 +109,10 @@ def test_real_renderer_masks_match_the_mesh(tmp_path):
     """With the OpenCL renderer: the mask is the instance id of the triangle each pixel sees,
     and every copy shows up."""
     from invrender.render import Renderer
+    from invrender.render.analysis import analyse
 
     scene, meta = make_duplicates(SMALL_DUPLICATES)
-    renderer = Renderer(scene)
+    renderer = Renderer(scene, analyse(scene))
     out = renderer.render(scene.cameras[0], spp=4, seed=0)
     tri, ids = out["triangle_id"], out["instance_id"]
     hit = tri >= 0
@@ -130,15 +131,16 @@ def test_real_renderer_sees_the_baked_emission():
     reports there (kd = ks = 0, so nothing is reflected): the atlas convention is the renderer's."""
     from scipy.ndimage import binary_erosion
 
-    from invrender.geometry.atlas import texel_index
+    from invrender.scene.atlas import texel_index
     from invrender.render import Renderer
+    from invrender.render.analysis import analyse
 
     scene, meta = make_room({"atlas_resolution": 128, "cameras": {"count": 2, "width": 48, "height": 36}})
     emitter = np.zeros(scene.mesh.triangle_count, bool)
     for p in meta["parts"]:
         if p["emitter"]:
             emitter[p["faces"][0] : p["faces"][1]] = True
-    out = Renderer(scene).render(scene.cameras[1], spp=16, seed=0)  # odd views look up
+    out = Renderer(scene, analyse(scene)).render(scene.cameras[1], spp=16, seed=0)  # odd views look up
     tri = out["triangle_id"]
     on_light = np.zeros(tri.shape, bool)
     on_light[tri >= 0] = emitter[tri[tri >= 0]]

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from invrender.geometry.atlas import texel_index
+from invrender.scene.atlas import texel_index
 from invrender.scene.cameras import project_points
 from invrender.synthesize.duplicates import _label, build_object, make_duplicates, object_mesh
 from invrender.synthesize.primitives import signed_volume

@@ -35,56 +35,54 @@ def _load_config(path: str | None) -> dict:
 
 
 def cmd_synthesize(args):
-    from .render.renderer import Renderer
-    from .synthesize import synthesize
+    from .synthesize import stage
 
-    synthesize(args.kind, Path(args.out), _load_config(args.config), spp=args.spp, seed=args.seed,
-               renderer_factory=lambda scene: Renderer(scene, device=args.device))
+    stage.run(args.kind, Path(args.out), _load_config(args.config), spp=args.spp, seed=args.seed, device=args.device)
 
 
 def cmd_features(args):
-    from .render.features import AnalysisSettings
-    from .render.stage import write_features
+    from .features import stage
+    from .render.analysis import AnalysisSettings
 
     analysis = _load_config(args.config).get("analysis", {})
     for field in fields(AnalysisSettings):  # flags win over the YAML
         if getattr(args, field.name) is not None:
             analysis[field.name] = getattr(args, field.name)
-    write_features(args.scene, args.out, AnalysisSettings(**analysis), _key_values(args.set), device=args.device)
+    stage.run(args.scene, args.out, AnalysisSettings(**analysis), _key_values(args.set), device=args.device)
 
 
 def cmd_render(args):
-    from .render.stage import render_views
+    from .renders import stage
 
-    render_views(args.scene, args.out, args.features, spp=args.spp, seed=args.seed, cameras=args.camera,
-                 device=args.device)
+    stage.run(args.scene, args.out, args.features, spp=args.spp, seed=args.seed, cameras=args.camera,
+              device=args.device, max_bounces=args.max_bounces, overrides=_key_values(args.set))
 
 
 def cmd_cameras(args):
-    from .scene.cameras import convert_cameras
+    from .cameras import stage
 
-    convert_cameras(args.source, args.out)
+    stage.run(args.source, args.out)
 
 
 def cmd_geometry(args):
-    from .geometry.stage import run_geometry
+    from .geometry import stage
 
-    run_geometry(args.source, args.out, target_faces=args.target_faces, texels_per_meter=args.texels_per_meter,
-                 atlas_resolution=args.atlas_resolution, padding=args.padding, poisson_depth=args.poisson_depth,
-                 threads=args.threads)
+    stage.run(args.source, args.out, target_faces=args.target_faces, texels_per_meter=args.texels_per_meter,
+              atlas_resolution=args.atlas_resolution, padding=args.padding, poisson_depth=args.poisson_depth,
+              threads=args.threads)
 
 
 def cmd_gradients(args):
-    from .render.gradients_stage import write_gradients
+    from .gradients import stage
 
-    write_gradients(args.geometry, args.cameras, args.images, args.out, batch=args.batch, spp=args.spp,
-                    seed=args.seed, iteration=args.iteration, device=args.device, accumulation=args.accumulation)
+    stage.run(args.geometry, args.cameras, args.images, args.out, batch=args.batch, spp=args.spp,
+              seed=args.seed, iteration=args.iteration, device=args.device, accumulation=args.accumulation)
 
 
 def cmd_export(args):
-    from .export import export_usd
+    from .export import stage
 
-    export_usd(args.scene, args.out, usdc=args.usdc, poses=args.poses, instancing=not args.no_instancing)
+    stage.run(args.scene, args.out, usdc=args.usdc, poses=args.poses, instancing=not args.no_instancing)
 
 
 def cmd_import_usd(args):
@@ -130,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene")
     p.add_argument("--out", required=True)
     p.add_argument("--features", help="features.json (default: analyse the scene)")
+    p.add_argument("--max-bounces", type=int, help="bounce limit (overrides the features' max_bounces)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a feature after analysis, e.g. specular=false (repeatable)")
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--camera", action="append", help="render only this camera (repeatable)")

@@ -358,7 +358,7 @@ def reference_agreement(converged: dict) -> dict:
 
 
 def equal_error(true, start, covered, camera, bounces: int, settings: Settings, variant: str, device=None):
-    from ..render.features import analyse
+    from ..render.analysis import analyse
 
     features = replace(analyse(start, device=device), max_bounces=bounces)
     target, target_s, _ = _clock(target_image, true, camera, features, settings.target_spp, device)
@@ -499,7 +499,7 @@ def _rss_mb() -> float:
 def memory_probe(renderer: str, side: int, bounces: int, accumulation: str, variant: str, device=None) -> dict:
     """Runs in its own process (`python -m invrender.bench.gradients memory-probe`): one pass of
     side x side rays at 1 spp, B bounces, L2 loss against a black target."""
-    from ..render.features import analyse
+    from ..render.analysis import analyse
 
     _, start, _ = lambertian_room(side, side)
     camera = start.cameras[ROOM_VIEW]
@@ -559,7 +559,7 @@ def memory_section(settings: Settings, variant: str, accumulations, device=None)
 
 
 def accumulation_section(start, camera, settings: Settings, device=None) -> list[dict]:
-    from ..render.features import analyse
+    from ..render.analysis import analyse
 
     rows = []
     target = np.zeros((camera.height, camera.width, 3), np.float32)

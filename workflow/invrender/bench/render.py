@@ -424,7 +424,7 @@ def verdict(check: dict, spp: int, tolerance: float = 0.01) -> str:
 
 
 def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
-    from ..render.features import analyse
+    from ..render.analysis import analyse
 
     features = replace(analyse(scene, device=device), max_bounces=bounces)
     inv = InvrenderRunner(scene, camera, features, device)
@@ -634,7 +634,8 @@ def _interleaved(runners, spp, repeats, desc):
 
 
 def features_section(scene, camera, settings: Settings, device=None) -> list[dict]:
-    from ..render.features import Features, analyse_scene
+    from ..render.analysis import analyse_scene
+    from ..render.features import Features
 
     rows = []
     pixels = camera.width * camera.height
@@ -669,7 +670,8 @@ def features_section(scene, camera, settings: Settings, device=None) -> list[dic
 
 
 def profile_section(scene, camera, settings: Settings, variant: str, device=None) -> list[dict]:
-    from ..render.features import Features, analyse
+    from ..render.analysis import analyse
+    from ..render.features import Features
 
     analysed = analyse(scene, device=device)
     bounces = analysed.max_bounces

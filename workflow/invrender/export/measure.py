@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.features import analyse
+from ..render.analysis import analyse
 from ..render.renderer import Renderer
 from ..scene.format import load_scene, write_scene
 from ..scene.regions import classify_faces

@@ -386,3 +386,6 @@ def _objects_summary(scene: Scene, parts: list[Part], layers: list[str]) -> dict
         "faces": int(len(scene.mesh.faces)),
         "material_sets": sorted(scene.packing.rects),
     }
+
+
+run = export_usd  # the stage contract's entry point (stage.py:run); export_usd is the API's name

@@ -1,5 +1,6 @@
-"""Geometry: UV atlases over meshes (xatlas) and the texel -> surface point tables built on them."""
+"""The `geometry` stage: a capture's mesh or point cloud cleaned, simplified and unwrapped
+(``stage.run``); the atlas itself (UVs, texel -> surface point) is a scene format: scene/atlas.py."""
 
-from .atlas import AtlasTexels, UVAtlas, bake, dilate, rasterize_atlas, texel_index, unwrap
+from .stage import run
 
-__all__ = ["AtlasTexels", "UVAtlas", "bake", "dilate", "rasterize_atlas", "texel_index", "unwrap"]
+__all__ = ["run"]

@@ -23,10 +23,10 @@ from tqdm import tqdm
 from ..scene.atomic import atomic_dir
 from ..scene.mesh_io import write_ply
 from ..scene.types import Mesh, SceneError
-from .atlas import rasterize_atlas, triangle_areas, unwrap
+from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from .clean import DEFAULT_TARGET_FACES, clean_mesh, input_kind, load_geometry, reconstruct, simplify
 
-__all__ = ["run_geometry", "texel_density", "REPORT_VERSION"]
+__all__ = ["run", "texel_density", "REPORT_VERSION"]
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ def texel_density(positions, faces, uvs, height: int, width: int) -> np.ndarray:
         return np.where(area > 0, np.sqrt(uv_area / area), np.nan)
 
 
-def run_geometry(
+def run(
     source,
     out_dir,
     target_faces: int = DEFAULT_TARGET_FACES,

@@ -24,7 +24,8 @@ def pixel_requests(camera: Camera, camera_index: int = 0, ray_offset: int = 0) -
 
 
 class Renderer:
-    """Renders a scene with kernels built for its features (analysed if not given).
+    """Renders a scene with kernels built for exactly the given features (render/analysis.py
+    decides them; the renderer never does).
 
     w_env and w_emit are the mixture weights of the environment and emitter strategies
     (MILO uses 0.25 each); they apply only when the feature is compiled in. `proposal`, a test
@@ -32,13 +33,12 @@ class Renderer:
     renders are then importance-sampled estimates of `scene` with a proposal that stays put.
     """
 
-    def __init__(self, scene: Scene, features: Features | None = None, device: str | None = None,
+    def __init__(self, scene: Scene, features: Features, device: str | None = None,
                  w_env: float = 0.25, w_emit: float = 0.25, host_scene: HostScene | None = None,
                  proposal: Maps | None = None):
-        if features is None:
-            from .features import analyse
-
-            features = analyse(scene)
+        if not isinstance(features, Features):
+            raise TypeError(f"Renderer: features: expected a Features (render/analysis.analyse decides them), "
+                            f"got {type(features).__name__}")
         self.scene, self.features = scene, features
         self.w_env, self.w_emit = w_env, w_emit
         self.context, self.queue = context_and_queue(device)

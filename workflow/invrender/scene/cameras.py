@@ -324,18 +324,6 @@ def read_transforms_json(path) -> list[Camera]:
 # ---------------------------------------------------------------------------- the cameras stage
 
 
-def convert_cameras(source, out_dir) -> list[Camera]:
-    """The `cameras` stage: a capture's cameras (COLMAP model directory, text or binary, or a
-    transforms.json), read by ``read_cameras`` and written to ``out_dir`` as a COLMAP text model
-    (atomically), so that every later stage reads one format. Returns the cameras."""
-    cameras = read_cameras(source)
-    if not cameras:
-        raise SceneError(Path(source), "(cameras)", "at least one posed camera")
-    write_colmap(out_dir, cameras)
-    log.info("%s: %d camera(s) -> %s", source, len(cameras), out_dir)
-    return cameras
-
-
 # Forward (z) and down (y) axes of the six cube-face cameras, in the order +X, -X, +Y, -Y, +Z, -Z.
 CUBE_FACE_AXES = (
     ((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)),

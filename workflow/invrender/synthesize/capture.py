@@ -38,10 +38,12 @@ log = logging.getLogger(__name__)
 AOV_SHAPES = {"radiance": (3,), "instance_id": ()}
 
 
-def _default_renderer(scene: Scene):
-    from ..render import Renderer
+def _default_renderer(scene: Scene, device: str | None = None):
+    """The truth is rendered with every effect it calls for (render/analysis.py decides)."""
+    from ..render.analysis import analyse
+    from ..render.renderer import Renderer
 
-    return Renderer(scene)
+    return Renderer(scene, analyse(scene, device=device), device=device)
 
 
 def _stem(name: str) -> str:

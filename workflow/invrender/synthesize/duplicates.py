@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.atlas import rasterize_atlas, triangle_areas, unwrap
+from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from ..scene.cameras import project_points
 from ..scene.types import Maps, Mesh, Scene
 from .primitives import CYLINDER_PARTS, axis_grid, cylinder, subdivide_breaks

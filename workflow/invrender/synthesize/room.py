@@ -8,7 +8,7 @@ Outside is a kg cube map: sky gradient, ground, a small bright sun.
 
 Geometry is unwrapped with xatlas (one group per part, so charts never straddle two
 materials), rasterised into the atlas, and the procedural materials are evaluated at each
-texel's 3D point and dilated (``geometry.atlas``). Everything follows from the config and its
+texel's 3D point and dilated (``scene.atlas``). Everything follows from the config and its
 seed.
 
 This module also holds what the other synthetic scene (``duplicates.py``) shares with it:
@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..geometry.atlas import bake, rasterize_atlas, unwrap
+from ..scene.atlas import bake, rasterize_atlas, unwrap
 from ..scene.types import Camera, Maps, Mesh, Scene
 from .primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
 

@@ -1,11 +1,11 @@
-"""geometry.atlas: xatlas unwrap, texel rasterisation, dilation, atlas.npz."""
+"""scene.atlas: xatlas unwrap, texel rasterisation, dilation, atlas.npz."""
 
 import time
 
 import numpy as np
 import pytest
 
-from invrender.geometry.atlas import AtlasTexels, dilate, rasterize_atlas, texel_index, triangle_areas, unwrap
+from invrender.scene.atlas import AtlasTexels, dilate, rasterize_atlas, texel_index, triangle_areas, unwrap
 from invrender.scene.types import Mesh
 from invrender.synthesize.primitives import box, concatenate, cylinder, face_normals
 

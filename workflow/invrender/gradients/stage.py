@@ -13,16 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..render.adjoint import backward
+from ..render.batches import ray_batch
+from ..render.features import Features
+from ..render.renderer import Renderer
+from ..render.torch_ops import MAP_ORDER
 from ..scene.atomic import atomic_dir
 from ..scene.cameras import read_cameras
-from ..scene.images import read_image, write_exr, write_png_preview
+from ..scene.capture import pixel_targets
+from ..scene.images import write_exr, write_png_preview
 from ..scene.mesh_io import read_mesh
-from ..scene.types import Maps, Scene, SceneError
-from .adjoint import backward
-from .batches import ray_batch
-from .features import Features
-from .renderer import Renderer
-from .torch_ops import MAP_ORDER
+from ..scene.types import Maps, Scene
 
 log = logging.getLogger(__name__)
 # A neutral start in which every map receives a gradient: some light everywhere (ke, and kg
@@ -40,21 +41,6 @@ def initial_scene(geometry_dir, cameras_path, cube: int = 16, initial: dict = IN
     return Scene(mesh, Maps.uniform(size=size, cube=cube, **initial), read_cameras(cameras_path))
 
 
-def targets_for(images_dir, cameras, requests) -> np.ndarray:
-    """The captured radiance of each requested pixel (images_dir/<camera name>, linear RGB)."""
-    images = []
-    for camera in cameras:
-        path = Path(images_dir) / camera.name
-        if not path.exists():
-            raise SceneError(path, f"image of camera {camera.name}", "an image for every camera of the model")
-        image = read_image(path)
-        if image.shape[:2] != (camera.height, camera.width):
-            raise SceneError(path, "size", f"{camera.width} x {camera.height} as its camera says, got "
-                                           f"{image.shape[1]} x {image.shape[0]}")
-        images.append(image[..., :3] if image.shape[2] >= 3 else np.repeat(image, 3, axis=2))
-    return np.stack([images[c][y, x] for c, x, y, _ in requests]).astype(np.float32)
-
-
 def signed_preview(gradient: np.ndarray) -> np.ndarray:
     """Red for positive, blue for negative d loss / d map (summed over RGB), scaled by the 99th
     percentile of |g|: where raising the map would raise the loss, and where it would lower it."""
@@ -64,13 +50,13 @@ def signed_preview(gradient: np.ndarray) -> np.ndarray:
     return np.stack([np.maximum(g, 0), np.zeros_like(g), np.maximum(-g, 0)], -1)
 
 
-def write_gradients(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
+def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
                     seed: int = 0, iteration: int = 0, device: str | None = None,
                     accumulation: str = "fixed") -> dict:
     scene = initial_scene(geometry_dir, cameras_path)
     total = sum(c.width * c.height for c in scene.cameras)
     requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
-    target = targets_for(images_dir, scene.cameras, requests)
+    target = pixel_targets(images_dir, scene.cameras, requests)
     renderer = Renderer(scene, Features.everything(), device=device)
     radiance, _, _ = renderer.render_requests(scene.cameras, requests, spp, seed)
     residual = radiance.astype(np.float64) - target

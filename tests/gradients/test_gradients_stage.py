@@ -7,6 +7,7 @@ import numpy as np
 from testscenes import box_room
 
 from invrender.cli import main
+from invrender.render.analysis import analyse
 from invrender.render.renderer import Renderer, pixel_requests
 from invrender.scene.cameras import write_colmap
 from invrender.scene.images import read_image, write_exr
@@ -23,7 +24,7 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
     np.savez(geometry / "atlas.npz", mask=np.ones(truth.maps.atlas_shape, bool))
     (capture / "images").mkdir(parents=True)
     write_colmap(capture / "sparse", truth.cameras)
-    image = Renderer(truth).render(truth.cameras[0], spp=256, seed=1, aovs=False)["radiance"]
+    image = Renderer(truth, analyse(truth)).render(truth.cameras[0], spp=256, seed=1, aovs=False)["radiance"]
     write_exr(capture / "images" / "view.exr", image)
 
     out = tmp_path / "gradients"

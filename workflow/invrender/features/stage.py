@@ -1,0 +1,25 @@
+"""The `features` stage: analyse a scene directory, write features.json with the evidence."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+from ..render.analysis import AnalysisSettings, analyse_scene
+from ..scene.atomic import atomic_path
+from ..scene.format import load_scene
+
+log = logging.getLogger(__name__)
+
+
+def run(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+        device: str | None = None):
+    """Analyse a scene directory and write features.json (features + the evidence behind them)."""
+    scene = load_scene(scene_dir)
+    features, evidence = analyse_scene(scene, settings, overrides, device)
+    log.info("features of %s: %s", scene_dir, features)
+    document = features.to_json() | {"evidence": evidence}
+    with atomic_path(Path(out_path)) as tmp:
+        Path(tmp).write_text(json.dumps(document, indent=2) + "\n")
+    return features

@@ -1,0 +1,106 @@
+"""Which effects a scene calls for: the one place that decides the kernels' build flags.
+
+The `features` stage (``features/stage.py``) writes the answer with its evidence as
+features.json; synthesis and the tools call ``analyse`` directly. Each decision is a number
+from the scene (largest ks, emitting triangles, whether rays escape, the largest albedo), so the
+evidence says why an effect was compiled in or out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .features import Features
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """How the features stage decides (config key `features:`)."""
+
+    specular_threshold: float = 1e-3  # largest ks at or below which the lobe is compiled out
+    bounce_fraction: float = 0.01  # power beyond the last bounce, relative to all power
+    max_bounces: int = 10
+    min_bounces: int = 1
+
+
+def bounces_for(rho: float, settings: AnalysisSettings) -> int:
+    """Smallest B whose tail bound rho^(B+1) / (1 - rho) is at most the fraction.
+
+    Each bounce multiplies the power leaving the surfaces by at most rho, the largest directional
+    albedo of any texel (an upper bound over all incidence angles, render/bsdf.max_albedo), so the
+    power carried by bounces > B is at most P_0 rho^(B+1) / (1 - rho), P_0 <= all power.
+    """
+    if rho >= 1.0:
+        return settings.max_bounces
+    for bounces in range(settings.min_bounces, settings.max_bounces + 1):
+        if rho ** (bounces + 1) / (1.0 - rho) <= settings.bounce_fraction:
+            return bounces
+    return settings.max_bounces
+
+
+def preview_camera(camera, max_width: int = 48):
+    """The same view at a small resolution (intrinsics scaled with the image)."""
+    from ..scene.types import Camera
+
+    scale = min(1.0, max_width / camera.width)
+    params = np.array(camera.params, np.float64)
+    params[: 4 if camera.model != "SIMPLE_PINHOLE" else 3] *= scale
+    return Camera(camera.name, camera.model, max(1, round(camera.width * scale)), max(1, round(camera.height * scale)),
+                  params, camera.R, camera.t)
+
+
+def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = None) -> bool:
+    """Whether paths from the cameras reach the space outside the mesh (and so see kg) within a
+    few bounces: rendered, not guessed from the mesh, since an open lamp quad inside a closed
+    room is no way out while a closed object seen from around it is. A white scene under a white
+    sky and no other light: any radiance at all is light that came from outside. A hole smaller
+    than the preview's sampling can be missed; windows count through kw, not here. Without
+    cameras nothing is known: assume rays escape."""
+    if not scene.cameras:
+        return True
+    from ..scene.types import Maps, Scene
+    from .renderer import Renderer  # the escape probe renders; renderer imports features only
+
+    probe = Scene(scene.mesh, Maps.uniform(size=(1, 1), kd=1.0, ks=0.0, kg=1.0, cube=1), scene.cameras)
+    features = Features(specular=False, emission=False, emitter_sampling=False, environment=True, window=False,
+                        env_sampling=False, max_bounces=bounces)
+    renderer = Renderer(probe, features, device=device)
+    return any(renderer.render(preview_camera(c), spp=spp, aovs=False)["radiance"].max() > 0 for c in scene.cameras)
+
+
+def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+                  device: str | None = None):
+    """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""
+    from .bsdf import max_albedo
+    from .scene_buffers import emitted_power
+
+    maps = scene.maps
+    max_ks = float(maps.ks.max())
+    specular = max_ks > settings.specular_threshold
+    emitting_triangles = int(np.count_nonzero(emitted_power(scene.mesh, maps) > 0))
+    emission = bool(maps.ke.max() > 0)
+    sky = bool(maps.kg.max() > 0)
+    window = sky and bool(maps.kw.max() > 0)
+    escape = sky and rays_can_escape(scene, device=device)
+    environment = sky and (window or escape)
+    ks_effective = maps.ks if specular else np.zeros_like(maps.ks)
+    rho = float(max_albedo(maps.kd, ks_effective, maps.ka).max())
+    features = Features(
+        specular=specular, emission=emission, emitter_sampling=emitting_triangles > 0,
+        environment=environment, window=window and environment, env_sampling=environment,
+        max_bounces=bounces_for(rho, settings),
+    ).with_overrides(overrides)
+    evidence = {
+        "max_ks": max_ks, "emitting_triangles": emitting_triangles, "max_ke": float(maps.ke.max()),
+        "max_kw": float(maps.kw.max()), "max_kg": float(maps.kg.max()), "rays_can_escape": escape,
+        "max_albedo": rho, "tail_bound": (rho ** (features.max_bounces + 1) / (1 - rho)) if rho < 1 else None,
+        "settings": asdict(settings), "overrides": overrides or {},
+    }
+    return features, evidence
+
+
+def analyse(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
+            device: str | None = None) -> Features:
+    return analyse_scene(scene, settings, overrides, device)[0]
