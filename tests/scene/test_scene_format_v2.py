@@ -97,3 +97,16 @@ def test_bad_material_map_names_its_set(v2_dir):
     assert "ks.exr: materials.paint.ks: expected the size of materials.paint.kd" in msg
     write_exr(v2_dir / "materials" / "paint" / "ks.exr", np.full((2, 3, 3), 2.0, np.float32))
     assert "materials.paint.ks: expected values in [0, 1]" in _error(v2_dir)
+
+
+def test_the_examples_in_docs_scene_format_are_valid_scene_json():
+    import re
+    from pathlib import Path
+
+    from invrender.scene.format import validate_scene_json
+
+    page = Path(__file__).resolve().parents[2] / "docs" / "scene-format.md"
+    examples = [json.loads(block) for block in re.findall(r"```json\n(.*?)```", page.read_text(), re.S)]
+    assert [doc["version"] for doc in examples] == [1, 2, 2]
+    for doc in examples:
+        validate_scene_json(doc, page)

@@ -1,4 +1,6 @@
-"""The scene directory: ``scene.json`` beside the mesh, the parameter maps and the cameras.
+"""The scene directory: ``scene.json`` beside the meshes, the parameter maps and the cameras.
+
+Version 1, one mesh and one atlas:
 
     scene/
       scene.json        {"format": "invrender-scene", "version": 1, "units": "meters", "up": "+Y",
@@ -8,6 +10,21 @@
       maps/kd.exr ...   kd, ks, ke RGB; ka, kw one channel (Y); all H x W
       maps/kg.exr       cube map (6 N, N, 3): faces +X, -X, +Y, -Y, +Z, -Z top to bottom
       cameras/          COLMAP text model (optional: a scene may have no cameras)
+
+Version 2, objects (a mesh in its own frame, a 4x4 transform, a material set) and material sets
+(each an atlas of its own size); objects naming one mesh file and one set are instances:
+
+    scene/
+      scene.json        {..., "version": 2, "objects": [{"name", "mesh", "transform", "material",
+                         "instance_id", "emission_sides"}, ...], "materials": {name: {"kd": ..., ...}},
+                         "kg": "maps/kg.exr", "cameras": "cameras"}
+      meshes/<object>.ply            one per distinct mesh
+      materials/<set>/kd.exr ...     kd, ks, ka, ke, kw of each set
+      maps/kg.exr
+
+A v2 scene loads packed (scene/packing.py): ``Scene.mesh`` and ``Scene.maps`` are the one
+world-space mesh and packed atlas the renderer reads, as for v1. docs/scene-format.md describes
+every field.
 
 ``load_scene`` validates everything before returning and raises one ``SceneError`` naming the
 file, the field and what was expected. ``write_scene`` validates the in-memory scene with the
