@@ -13,6 +13,9 @@ into a scene directory.
 - Cameras: every UsdGeom.Camera (cameras.py), the exact COLMAP camera where it is untouched.
 - Duplicates: instances become poses again (scene.json metadata `poses`, DESIGN.md form), so the
   next export instances them again; the names of prims become instance names.
+- A stage with objects (prims with invrender:role "object", the export of a v2 scene) comes back
+  as a v2 scene instead (`objects_to_scene`): each object with its transform and its meshes in its
+  own frame, the instances of one prototype sharing one mesh, one material set per material.
 
 With `exact=False` every invrender: attribute about appearance is ignored: the scene is what a
 tool that knows only the standard schemas sees (ka from roughness^4, no kw, the mesh lights'

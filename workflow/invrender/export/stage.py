@@ -11,6 +11,10 @@
       Cameras/<image>           one UsdGeom.Camera per input view (cameras.py)
     /Render/Products/<image>    the resolution and pixel aspect ratio of each camera
 
+A v2 scene (objects, material sets) is written by `write_objects_stage` instead: Looks/<set> per
+material set, Geometry/<object> an Xform with the object's transform and its mesh below it (split
+as above), objects sharing a mesh and a set as instanceable references to Prototypes/<object>.
+
 Everything is written into a temporary directory beside the output, checked with the
 validators usdchecker runs (check.py), and renamed into place: a failure leaves nothing behind.
 """
