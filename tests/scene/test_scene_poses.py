@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from invrender.scene.poses import read_poses, validate_poses, write_poses
+from invrender.scene.poses import placements, read_poses, validate_poses, write_poses
 from invrender.scene.types import SceneError
 
 
@@ -58,3 +58,15 @@ def test_missing_and_unreadable_files(tmp_path):
     (tmp_path / "poses.json").write_text("{")
     with pytest.raises(SceneError, match="expected a readable JSON document"):
         read_poses(tmp_path / "poses.json")
+
+
+def test_placements_are_v2_objects_sharing_one_mesh_and_set():
+    from testscenes import cube_mesh
+
+    cube = cube_mesh()
+    doc = _doc(_pose(0.3, (1, 0, 2)), _pose(-1.2, (0, 0.5, 0)))
+    doc["instances"].append({"instance_id": 3, "mask_value": 3, "registered": False, "T_obj2world": np.eye(4).tolist()})
+    objects = placements(doc, cube, "paint", "can")
+    assert [(o.name, o.instance_id, o.material) for o in objects] == [("can_1", 1, "paint"), ("can_2", 2, "paint")]
+    assert all(o.mesh is cube for o in objects)
+    assert np.array_equal(objects[1].transform, _pose(-1.2, (0, 0.5, 0)))

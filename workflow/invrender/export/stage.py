@@ -282,6 +282,8 @@ def export_usd(scene_dir, out_dir, usdc: bool = False, poses=None, instancing: b
     scene_dir, out_dir = Path(scene_dir), Path(out_dir)
     scene = load_scene(scene_dir)  # every bad or missing input stops here, before anything is written
     if scene.version == 2:  # its instances are its objects sharing a mesh: no poses to read
+        if poses is not None:
+            log.warning("%s is a v2 scene: its objects are its instances, %s is not read", scene_dir, poses)
         return _export_objects(scene, scene_dir, out_dir, usdc)
     metadata = read_scene_json(scene_dir).get("metadata", {})
     names = instance_names(metadata)

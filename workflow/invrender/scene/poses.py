@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_path
-from .types import SceneError
+from .types import Mesh, SceneError, SceneObject
 
-__all__ = ["validate_poses", "read_poses", "write_poses"]
+__all__ = ["validate_poses", "read_poses", "write_poses", "placements"]
 
 
 def validate_poses(doc, where) -> list[dict]:
@@ -66,3 +66,10 @@ def write_poses(path, doc: dict) -> None:
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
+
+
+def placements(doc, mesh: Mesh, material: str, name: str = "object", where="poses.json") -> list[SceneObject]:
+    """The registered copies of a poses document as v2 objects: `mesh` (in the object frame)
+    placed at each T_obj2world with the instance id as its own, all sharing `material`."""
+    return [SceneObject(f"{name}_{pose['instance_id']}", mesh, material, pose["T"], instance_id=pose["instance_id"])
+            for pose in validate_poses(doc, where)]
