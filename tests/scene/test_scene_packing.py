@@ -94,3 +94,11 @@ def test_bad_objects_are_refused(edit, message):
     edit(obj)
     with pytest.raises(SceneError, match=message.replace("[", r"\[").replace("]", r"\]")):
         pack_scene([obj], _sets(np.random.default_rng(5), {"p": (2, 2)}), np.zeros((6, 1, 1, 3), np.float32))
+
+
+def test_an_object_without_uvs_is_refused():
+    mesh = cube_mesh()
+    mesh.uvs = None
+    with pytest.raises(SceneError, match=r"objects\[0\]\.mesh \(a\): vertex s,t"):
+        pack_scene([SceneObject("a", mesh, "p")], _sets(np.random.default_rng(6), {"p": (2, 2)}),
+                   np.zeros((6, 1, 1, 3), np.float32))

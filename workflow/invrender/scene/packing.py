@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .mesh_io import validate_mesh
 from .types import ATLAS_MAPS, EMISSION_SIDES, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 
 __all__ = ["PADDING", "Rect", "Packing", "layout", "pack_scene", "flatten", "object_transform", "check_transform",
@@ -125,7 +126,7 @@ def check_transform(transform, file, field: str) -> np.ndarray:
 
 def validate_objects(objects: list[SceneObject], materials, file) -> None:
     """What the schema cannot say about a v2 scene's objects: unique names, known material sets,
-    valid meshes and transforms."""
+    valid meshes (with UVs) and transforms."""
     seen = set()
     for k, obj in enumerate(objects):
         field = f"objects[{k}]"
@@ -137,6 +138,7 @@ def validate_objects(objects: list[SceneObject], materials, file) -> None:
         if obj.emission_sides not in EMISSION_SIDES:
             raise SceneError(file, f"{field}.emission_sides", f"one of {EMISSION_SIDES}, got {obj.emission_sides!r}")
         check_transform(obj.transform, file, f"{field}.transform")
+        validate_mesh(obj.mesh, f"{file}: {field}.mesh ({obj.name})", require_uvs=True)
     if not objects:
         raise SceneError(file, "objects", "at least one object")
 
