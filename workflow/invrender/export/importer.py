@@ -34,7 +34,7 @@ from pxr import Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from ..scene.format import write_scene
 from ..scene.regions import face_texels
-from ..scene.packing import pack_scene
+from ..scene.packing import object_transform, pack_scene
 from ..scene.types import Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 from . import schema
 from .cameras import read_camera
@@ -81,12 +81,6 @@ def stage_to_scene(stage: Usd.Stage) -> np.ndarray:
 def _world(prim: Usd.Prim, to_scene: np.ndarray) -> np.ndarray:
     local_to_world = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), np.float64)
     return to_scene @ local_to_world.T  # USD matrices act on row vectors
-
-
-def _transform(positions: np.ndarray, m: np.ndarray) -> np.ndarray:
-    if np.array_equal(m, np.eye(4)):
-        return positions  # untouched float32 positions stay bit for bit
-    return (positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
 
 
 def _instance_root(prim: Usd.Prim) -> Usd.Prim | None:
@@ -139,7 +133,7 @@ def _read_mesh_prim(prim: Usd.Prim, to_scene: np.ndarray, contents: StageContent
         return
     piece = read_mesh(prim, instance)
     world = _world(prim, to_scene)
-    piece.positions = _transform(piece.positions, world)
+    piece.positions = object_transform(piece.positions, world)
     if np.linalg.det(world[:3, :3]) < 0:
         piece.faces = piece.faces[:, ::-1].copy()  # a mirror flips the winding back
     material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
@@ -340,7 +334,7 @@ def read_objects(stage: Usd.Stage, where: str, exact: bool, materials: dict) -> 
             objects[str(owner.GetPath())] = ImportedObject(owner, _world(owner, to_scene))
         piece = read_mesh(prim)
         relative = _relative(prim, owner)
-        piece.positions = _transform(piece.positions, relative)
+        piece.positions = object_transform(piece.positions, relative)
         if np.linalg.det(relative[:3, :3]) < 0:
             piece.faces = piece.faces[:, ::-1].copy()
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
