@@ -5,7 +5,8 @@ import pytest
 from pxr import Usd, UsdGeom
 
 from invrender.export.geometry import MeshPiece, author_mesh, connected_faces, read_mesh, weld
-from invrender.export.instancing import check_poses, find_duplicates
+from invrender.export.instancing import find_duplicates
+from invrender.scene.poses import validate_poses
 from invrender.scene.types import Mesh, SceneError
 
 
@@ -100,6 +101,6 @@ def test_duplicates_are_found_from_their_poses_and_checked():
 def test_poses_must_be_rigid_transforms():
     scaled = np.diag([2.0, 2.0, 2.0, 1.0])
     with pytest.raises(SceneError, match="T_obj2world"):
-        check_poses({"instances": [{"instance_id": 1, "T_obj2world": scaled.tolist()}]}, "poses.json")
-    assert check_poses({"instances": [{"instance_id": 1, "registered": False, "T_obj2world": np.eye(4).tolist()}]},
+        validate_poses({"instances": [{"instance_id": 1, "T_obj2world": scaled.tolist()}]}, "poses.json")
+    assert validate_poses({"instances": [{"instance_id": 1, "registered": False, "T_obj2world": np.eye(4).tolist()}]},
                        "poses.json") == []

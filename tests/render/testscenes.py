@@ -186,3 +186,114 @@ def hard_room(ks=1.0, ka=1e-6, light=1e6, kd=(0.6, 0.5, 0.4), open_top=False):
     mesh = Mesh(np.concatenate([room.mesh.positions, p, degenerate]), faces[2 if open_top else 0:].astype(np.int32),
                 uvs)
     return Scene(mesh, room.maps, room.cameras)
+
+
+# ---------------------------------------------------------------------------- v2: objects
+
+
+def rigid(angle_deg=0.0, translation=(0, 0, 0)) -> np.ndarray:
+    """4x4 object-to-world: a rotation about +Y, then a translation."""
+    a = np.radians(angle_deg)
+    T = np.eye(4)
+    T[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
+    T[:3, 3] = translation
+    return T
+
+
+def _in_rect(uvs, u0, v0, u1, v1, inset=1e-3):
+    """0..1 UVs squeezed into [u0, u1] x [v0, v1], inset a little: no lookup lands on a texel border."""
+    u = u0 + inset + uvs[:, 0] * (u1 - u0 - 2 * inset)
+    v = v0 + inset + uvs[:, 1] * (v1 - v0 - 2 * inset)
+    return np.stack([u, v], 1).astype(np.float32)
+
+
+def cube_mesh(half=0.25):
+    """A cube standing on y = 0, fronts outwards, every face over its whole (inset) atlas."""
+    h = half
+    faces = [((0, h, h), (h, 0, 0), (0, h, 0)), ((0, h, -h), (-h, 0, 0), (0, h, 0)),
+             ((h, h, 0), (0, 0, -h), (0, h, 0)), ((-h, h, 0), (0, 0, h), (0, h, 0)),
+             ((0, 2 * h, 0), (h, 0, 0), (0, 0, -h)), ((0, 0, 0), (h, 0, 0), (0, 0, h))]
+    parts = [quad(*f) for f in faces]
+    mesh = merge(*[(p, f, _in_rect(uv, 0, 0, 1, 1)) for p, f, uv in parts])
+    mesh.instance_ids = None
+    return mesh
+
+
+def three_objects(size=(32, 24), seed=0):
+    """The v2 acceptance scene: a closed box room with a ceiling light (material 'walls', 4 x 4
+    texels, the only emitter), a table top ('wood', 2 x 2, glossy) and one cube instanced twice
+    ('paint', 2 x 3), each placed by its own transform inside a room that is itself moved.
+    Returns (objects, materials, kg, cameras) for scene.packing.pack_scene."""
+    from invrender.scene.types import Atlas, SceneObject
+
+    rng = np.random.default_rng(seed)
+    W, H, D = 2.0, 2.6, 1.5
+    room_parts = [  # (quad, UV rect in the walls atlas)
+        (quad((0, 0, 0), (0, 0, D), (W, 0, 0)), (0, 0.5, 0.5, 1)),  # floor
+        (quad((0, H, 0), (W, 0, 0), (0, 0, D)), (0.5, 0.5, 1, 1)),  # ceiling
+        (quad((0, H / 2, -D), (W, 0, 0), (0, H / 2, 0)), (0, 0, 0.5, 0.5)),  # back
+        (quad((0, H / 2, D), (0, H / 2, 0), (W, 0, 0)), (0, 0, 0.5, 0.5)),  # front
+        (quad((-W, H / 2, 0), (0, H / 2, 0), (0, 0, D)), (0, 0, 0.5, 0.5)),  # left
+        (quad((W, H / 2, 0), (0, 0, D), (0, H / 2, 0)), (0, 0, 0.5, 0.5)),  # right
+        (quad((0.3, H - 0.01, 0.2), (0.5, 0, 0), (0, 0, 0.4)), (0.5, 0, 1, 0.5)),  # light, facing down
+    ]
+    room = merge(*[(p, f, _in_rect(uv, *rect)) for (p, f, uv), rect in room_parts])
+    room.instance_ids = None
+    p, f, uv = quad((0, 0, 0), (0.3, 0, 0), (0, 0, -0.3))
+    table = Mesh(p, f, _in_rect(uv, 0, 0, 1, 1))
+    cube = cube_mesh()
+
+    walls = Atlas.uniform((4, 4), kd=0.0, ks=0.0, ka=0.1)
+    walls.kd[:] = rng.uniform(0.3, 0.7, (4, 4, 3))
+    walls.ke[2:, 2:] = rng.uniform(6.0, 10.0, (2, 2, 3))  # under the light's UVs: rows 2-3, cols 2-3
+    walls.kd[2:, 2:] = 0.0
+    wood = Atlas.uniform((2, 2), kd=0.0, ks=0.0, ka=0.05)
+    wood.kd[:] = rng.uniform(0.4, 0.8, (2, 2, 3))
+    wood.ks[:] = rng.uniform(0.2, 0.4, (2, 2, 3))
+    paint = Atlas.uniform((2, 3), kd=0.0, ks=0.1, ka=0.2)
+    paint.kd[:] = rng.uniform(0.2, 0.9, (2, 3, 3))
+    materials = {"walls": walls, "wood": wood, "paint": paint}
+
+    placed = rigid(20, (0.3, 0.0, 0.1))  # the room itself is moved
+    objects = [
+        SceneObject("room", room, "walls", placed, instance_id=1),
+        SceneObject("table", table, "wood", placed @ rigid(30, (-0.8, 0.4, -0.3)), instance_id=2),
+        SceneObject("cube_a", cube, "paint", placed @ rigid(15, (-0.2, 0.0, -0.5)), instance_id=3),
+        SceneObject("cube_b", cube, "paint", placed @ rigid(60, (0.6, 0.0, -0.2)), instance_id=4),
+    ]
+    to_world = lambda x: (placed @ np.append(x, 1.0))[:3]
+    camera = look_at_camera(to_world((-1.2, 1.4, 1.2)), to_world((0.5, 0.6, -0.6)), width=size[0], height=size[1],
+                            fov_x_deg=75)
+    kg = np.zeros((6, 2, 2, 3), np.float32)
+    return objects, materials, kg, [camera]
+
+
+def flattened_by_hand(objects, materials, kg, cameras):
+    """The same geometry as one v1 scene, built without scene/packing.py: the material sets side by
+    side left to right (no padding), each object's positions through its transform, its UVs into
+    its set's columns."""
+    width = sum(a.atlas_shape[1] for a in materials.values())
+    height = max(a.atlas_shape[0] for a in materials.values())
+    maps = Maps.uniform(size=(height, width), kd=0.0, ks=0.0, ka=0.1, kg=0.0, cube=kg.shape[1])
+    maps.kg[:] = kg
+    column, c = {}, 0
+    for name, atlas in materials.items():
+        h, w = atlas.atlas_shape
+        column[name] = c
+        for m in ("kd", "ks", "ka", "ke", "kw"):
+            getattr(maps, m)[:h, c : c + w] = getattr(atlas, m)
+        c += w
+    positions, faces, uvs, ids, offset = [], [], [], [], 0
+    for obj in objects:
+        T, mesh = obj.transform, obj.mesh
+        positions.append((mesh.positions.astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32))
+        faces.append(mesh.faces + offset)
+        h, w = materials[obj.material].atlas_shape
+        u = (column[obj.material] + mesh.uvs[:, 0].astype(np.float64) * w) / width
+        v = 1 - (1 - mesh.uvs[:, 1].astype(np.float64)) * h / height  # rows from the top
+        uvs.append(np.stack([u, v], 1).astype(np.float32))
+        ids.append(np.full(len(mesh.faces), obj.instance_id, np.int32))
+        offset += len(mesh.positions)
+    mesh = Mesh(np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs),
+                np.concatenate(ids))
+    return Scene(mesh, maps, cameras), column

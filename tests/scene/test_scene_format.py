@@ -90,7 +90,8 @@ def test_overwrite_replaces_whole(scene_dir):
 def test_schema_is_draft_2020_12():
     schema = json.loads(SCHEMA_PATH.read_text())
     assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
-    assert schema["additionalProperties"] is False
+    assert schema["$defs"]["v1"]["additionalProperties"] is False
+    assert schema["$defs"]["v2"]["additionalProperties"] is False
 
 
 def one_error(directory) -> str:
@@ -114,8 +115,10 @@ def test_unknown_top_level_key(scene_dir):
 
 
 def test_wrong_version_and_path_outside(scene_dir):
-    edit_json(scene_dir, lambda d: d.update(version=2))
-    assert "scene.json: version: expected 1, got 2" in one_error(scene_dir)
+    edit_json(scene_dir, lambda d: d.update(version=3))
+    assert "scene.json: version: expected one of 1, 2, got 3" in one_error(scene_dir)
+    edit_json(scene_dir, lambda d: d.update(version=2))  # a v1 document that says it is v2
+    assert "scene.json: maps: expected no such field: allowed fields are cameras, format, kg, materials" in one_error(scene_dir)
     edit_json(scene_dir, lambda d: (d.update(version=1), d["maps"].update(kd="../kd.exr")))
     assert "scene.json: maps.kd: expected a relative path" in one_error(scene_dir)
 

@@ -23,7 +23,7 @@ from pxr import Sdf, Usd, UsdGeom, Vt
 from ..scene.types import Mesh, SceneError
 from . import schema
 
-__all__ = ["MeshPiece", "piece_of", "weld", "face_normals", "connected_faces", "author_mesh", "read_mesh"]
+__all__ = ["MeshPiece", "piece_of", "weld", "face_normals", "connected_faces", "author_mesh", "read_mesh", "authored_value"]
 
 
 @dataclass
@@ -150,7 +150,7 @@ def _array(attr, dtype, width: int | None = None, where: str = "") -> np.ndarray
     return out.reshape(-1, width) if width else out.reshape(-1)
 
 
-def _prim_value(prim: Usd.Prim, name: str):
+def authored_value(prim: Usd.Prim, name: str):
     attr = prim.GetAttribute(name)
     return attr.Get() if attr and attr.HasAuthoredValue() else None
 
@@ -194,6 +194,6 @@ def read_mesh(prim: Usd.Prim, indices_prim: Usd.Prim | None = None) -> MeshPiece
     vertex_ids = _array(source.GetAttribute(schema.VERTEX_INDICES), np.int64)
     if face_ids is None or vertex_ids is None or len(face_ids) != len(faces) or len(vertex_ids) != len(positions):
         face_ids = vertex_ids = None  # not ours, or its topology was edited: keep its own order
-    instance_id = _prim_value(source, schema.INSTANCE_ID)
+    instance_id = authored_value(source, schema.INSTANCE_ID)
     return MeshPiece(positions=positions, uvs=uvs, faces=faces.astype(np.int32), face_ids=face_ids,
                      vertex_ids=vertex_ids, instance_id=int(instance_id or 0))

@@ -13,6 +13,9 @@ into a scene directory.
 - Cameras: every UsdGeom.Camera (cameras.py), the exact COLMAP camera where it is untouched.
 - Duplicates: instances become poses again (scene.json metadata `poses`, DESIGN.md form), so the
   next export instances them again; the names of prims become instance names.
+- A stage with objects (prims with invrender:role "object", the export of a v2 scene) comes back
+  as a v2 scene instead (`objects_to_scene`): each object with its transform and its meshes in its
+  own frame, the instances of one prototype sharing one mesh, one material set per material.
 
 With `exact=False` every invrender: attribute about appearance is ignored: the scene is what a
 tool that knows only the standard schemas sees (ka from roughness^4, no kw, the mesh lights'
@@ -31,10 +34,11 @@ from pxr import Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from ..scene.format import write_scene
 from ..scene.regions import face_texels
-from ..scene.types import Maps, Mesh, Scene, SceneError
+from ..scene.packing import object_transform, pack_scene
+from ..scene.types import Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 from . import schema
 from .cameras import read_camera
-from .geometry import MeshPiece, read_mesh
+from .geometry import MeshPiece, authored_value, read_mesh
 from .lights import light_radiance, mean_radiance, read_dome
 from .materials import MaterialSources, evaluate_maps, read_material, texture_shape
 
@@ -79,12 +83,6 @@ def _world(prim: Usd.Prim, to_scene: np.ndarray) -> np.ndarray:
     return to_scene @ local_to_world.T  # USD matrices act on row vectors
 
 
-def _transform(positions: np.ndarray, m: np.ndarray) -> np.ndarray:
-    if np.array_equal(m, np.eye(4)):
-        return positions  # untouched float32 positions stay bit for bit
-    return (positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
-
-
 def _instance_root(prim: Usd.Prim) -> Usd.Prim | None:
     while prim and prim.IsInstanceProxy():
         prim = prim.GetParent()
@@ -96,8 +94,9 @@ def _role(prim: Usd.Prim | None) -> str | None:
     return str(attr.Get()) if attr and attr.HasAuthoredValue() else None
 
 
-def read_stage(stage: Usd.Stage, where: str, exact: bool = True) -> StageContents:
-    """Everything the scene needs from a stage (module docstring)."""
+def read_stage(stage: Usd.Stage, where: str, exact: bool = True, meshes: bool = True) -> StageContents:
+    """Everything the scene needs from a stage (module docstring); without `meshes` only the sky
+    and the cameras (a v2 stage's objects are read by read_objects)."""
     to_scene = stage_to_scene(stage)
     contents = StageContents()
     resolutions = {}
@@ -108,7 +107,7 @@ def read_stage(stage: Usd.Stage, where: str, exact: bool = True) -> StageContent
             for target in product.GetCameraRel().GetTargets():
                 resolutions[target] = (int(resolution[0]), int(resolution[1])) if resolution else None
     for prim in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)):
-        if prim.IsA(UsdGeom.Mesh):
+        if prim.IsA(UsdGeom.Mesh) and meshes:
             _read_mesh_prim(prim, to_scene, contents, where, exact)
         elif (prim.IsA(UsdLux.DomeLight) or prim.IsA(UsdLux.DomeLight_1)) and contents.kg is None:
             if UsdGeom.Imageable(prim).ComputeVisibility() != UsdGeom.Tokens.invisible:
@@ -118,17 +117,23 @@ def read_stage(stage: Usd.Stage, where: str, exact: bool = True) -> StageContent
     return contents
 
 
-def _read_mesh_prim(prim: Usd.Prim, to_scene: np.ndarray, contents: StageContents, where: str, exact: bool) -> None:
+def _drawn(prim: Usd.Prim, role: str, exact: bool) -> bool:
+    """A mesh the scene keeps: not a guide or proxy, and visible (the export's own hidden
+    windows come back as windows in the exact view)."""
     imageable = UsdGeom.Imageable(prim)
+    if imageable.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+        return False
+    return imageable.ComputeVisibility() != UsdGeom.Tokens.invisible or (exact and role == "window")
+
+
+def _read_mesh_prim(prim: Usd.Prim, to_scene: np.ndarray, contents: StageContents, where: str, exact: bool) -> None:
     instance = _instance_root(prim)
     role = _role(instance) or _role(prim) or "surface"
-    if imageable.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+    if not _drawn(prim, role, exact):
         return
-    if imageable.ComputeVisibility() == UsdGeom.Tokens.invisible and not (exact and role == "window"):
-        return  # hidden in the tool; the export's own hidden windows come back as windows
     piece = read_mesh(prim, instance)
     world = _world(prim, to_scene)
-    piece.positions = _transform(piece.positions, world)
+    piece.positions = object_transform(piece.positions, world)
     if np.linalg.det(world[:3, :3]) < 0:
         piece.faces = piece.faces[:, ::-1].copy()  # a mirror flips the winding back
     material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
@@ -276,6 +281,124 @@ def _clip(maps: dict[str, np.ndarray], where: str) -> dict[str, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------------
+# v2 stages: objects (Xforms with role "object") back into objects and material sets
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class ImportedObject:
+    prim: Usd.Prim
+    world: np.ndarray  # object-to-world in the scene's frame
+    pieces: list[ImportedPiece] = field(default_factory=list)  # positions in the object's frame
+
+
+def has_objects(stage: Usd.Stage) -> bool:
+    """A stage exported from a v2 scene: some prim stands for an object."""
+    return any(_role(prim) == "object" for prim in stage.Traverse())
+
+
+def _object_of(prim: Usd.Prim) -> Usd.Prim | None:
+    """The object a mesh belongs to: its nearest ancestor with role "object" (through instances)."""
+    while prim and not prim.IsPseudoRoot():
+        if _role(prim) == "object":
+            return prim
+        prim = prim.GetParent()
+    return None
+
+
+def _relative(prim: Usd.Prim, owner: Usd.Prim) -> np.ndarray:
+    """4x4 from `prim`'s frame to `owner`'s: the local transforms in between (none: identity)."""
+    m = np.eye(4)
+    while prim != owner:
+        if prim.IsA(UsdGeom.Xformable):
+            local = np.array(UsdGeom.Xformable(prim).GetLocalTransformation(Usd.TimeCode.Default()), np.float64)
+            if not np.array_equal(local, np.eye(4)):
+                m = local.T @ m  # USD matrices act on row vectors
+        prim = prim.GetParent()
+    return m
+
+
+def read_objects(stage: Usd.Stage, where: str, exact: bool, materials: dict) -> list[ImportedObject]:
+    """Every object of a v2 stage with its meshes in its own frame; a mesh outside every object
+    (added in another tool) is an object of its own, placed where it is. `materials` collects
+    the sources of every bound material by path."""
+    to_scene = stage_to_scene(stage)
+    objects: dict[str, ImportedObject] = {}
+    for prim in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)):
+        if _role(prim) == "object" and not prim.IsInstanceProxy():
+            objects[str(prim.GetPath())] = ImportedObject(prim, _world(prim, to_scene))
+        if not prim.IsA(UsdGeom.Mesh) or not _drawn(prim, _role(prim) or "surface", exact):
+            continue
+        owner = _object_of(prim) or prim
+        if str(owner.GetPath()) not in objects:
+            objects[str(owner.GetPath())] = ImportedObject(owner, _world(owner, to_scene))
+        piece = read_mesh(prim)
+        relative = _relative(prim, owner)
+        piece.positions = object_transform(piece.positions, relative)
+        if np.linalg.det(relative[:3, :3]) < 0:
+            piece.faces = piece.faces[:, ::-1].copy()
+        material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+        key = str(material.GetPath()) if material else ""
+        if key not in materials:
+            materials[key] = (read_material(material, where, exact), _set_name(material))
+        objects[str(owner.GetPath())].pieces.append(
+            ImportedPiece(str(prim.GetPath()), piece, key, light_radiance(prim), _role(prim) or "surface"))
+    return [obj for obj in objects.values() if obj.pieces]
+
+
+def _set_name(material: UsdShade.Material | None) -> str:
+    if not material:
+        return "unbound"
+    return authored_value(material.GetPrim(), schema.MATERIAL_SET) or material.GetPrim().GetName()
+
+
+def _object_maps(obj: ImportedObject, mesh: Mesh, owner: np.ndarray, sources, exact: bool, where: str) -> dict:
+    """The maps of an object's material set: its main material's, with its mesh lights applied."""
+    shape = _atlas_shape(sources)
+    maps = evaluate_maps(sources, shape)
+    _apply_lights(mesh, owner, StageContents(pieces=obj.pieces), maps, shape, exact)
+    return _clip(maps, where)
+
+
+def objects_to_scene(stage: Usd.Stage, where: str, exact: bool) -> Scene:
+    """A v2 stage as a v2 scene: objects with their transforms (instances of one prototype share
+    one mesh), one material set per set name, the sky and the cameras."""
+    materials: dict[str, tuple] = {}
+    imported = read_objects(stage, where, exact, materials)
+    if not imported:
+        raise SceneError(where, "(stage)", "at least one visible UsdGeom.Mesh")
+    meshes, objects, sets, taken = {}, [], {}, set()
+    for obj in imported:
+        prototype = str(obj.prim.GetPrototype().GetPath()) if obj.prim.IsInstance() else str(obj.prim.GetPath())
+        if prototype not in meshes:
+            meshes[prototype] = assemble([item.piece for item in obj.pieces])
+        mesh, owner = meshes[prototype]
+        weights = {}
+        for k, item in enumerate(obj.pieces):
+            weights[item.material] = weights.get(item.material, 0) + int((owner == k).sum())
+        main = max(weights, key=weights.get)
+        others = sorted(set(weights) - {main})
+        if others:
+            log.warning("%s: meshes bound to %s besides its material %s: a v2 object has one material set, "
+                        "theirs are not kept", obj.prim.GetPath(), ", ".join(others), main)
+        sources, set_name = materials[main]
+        if set_name not in sets:
+            sets[set_name] = Atlas(**_object_maps(obj, mesh, owner, sources, exact, where))
+        name = authored_value(obj.prim, schema.OBJECT_NAME) or obj.prim.GetName()
+        unique, k = name, 1
+        while unique in taken:
+            unique, k = f"{name}_{k}", k + 1
+        taken.add(unique)
+        instance_id = authored_value(obj.prim, schema.INSTANCE_ID)
+        objects.append(SceneObject(unique, mesh, set_name, obj.world,
+                                   instance_id=None if instance_id is None else int(instance_id),
+                                   emission_sides=str(authored_value(obj.prim, schema.EMISSION_SIDES) or "two")))
+    contents = read_stage(stage, where, exact, meshes=False)
+    kg = contents.kg if contents.kg is not None else np.zeros((6, DEFAULT_CUBE, DEFAULT_CUBE, 3), np.float32)
+    return pack_scene(objects, sets, kg.astype(np.float32), contents.cameras)
+
+
+# ---------------------------------------------------------------------------------------------
 # The stage
 # ---------------------------------------------------------------------------------------------
 
@@ -299,6 +422,12 @@ def _metadata(contents: StageContents, usd_path: Path, exact: bool) -> dict:
     return metadata
 
 
+def _check_camera_names(cameras: list, usd_path) -> None:
+    names = [c.name for c in cameras]
+    if len(set(names)) != len(names):
+        raise SceneError(usd_path, "cameras", "cameras with distinct names (invrender:colmap:name or prim name)")
+
+
 def import_usd(usd_path, out_dir, exact: bool = True) -> Scene:
     """Read a USD stage (module docstring) and write it as a scene directory to `out_dir`."""
     usd_path = Path(usd_path)
@@ -309,15 +438,20 @@ def import_usd(usd_path, out_dir, exact: bool = True) -> Scene:
     except Tf.ErrorException as exc:
         raise SceneError(usd_path, "(file)", f"a USD stage that opens ({str(exc).strip()})") from None
     where = str(usd_path)
+    if has_objects(stage):
+        scene = objects_to_scene(stage, where, exact)
+        _check_camera_names(scene.cameras, usd_path)
+        write_scene(out_dir, scene, metadata={"imported_from": str(usd_path), "exact": exact})
+        log.info("imported %s -> %s: %d objects, %d faces, %d cameras", usd_path, out_dir, len(scene.objects),
+                 len(scene.mesh.faces), len(scene.cameras))
+        return scene
     contents = read_stage(stage, where, exact)
     if not contents.pieces:
         raise SceneError(usd_path, "(stage)", "at least one visible UsdGeom.Mesh")
     mesh, owner = assemble([item.piece for item in contents.pieces])
     maps = _clip(bake_maps(mesh, owner, contents, exact, where), where)
     kg = contents.kg if contents.kg is not None else np.zeros((6, DEFAULT_CUBE, DEFAULT_CUBE, 3), np.float32)
-    names = [c.name for c in contents.cameras]
-    if len(set(names)) != len(names):
-        raise SceneError(usd_path, "cameras", "cameras with distinct names (invrender:colmap:name or prim name)")
+    _check_camera_names(contents.cameras, usd_path)
     scene = Scene(mesh=mesh, maps=Maps(**maps, kg=kg.astype(np.float32)), cameras=contents.cameras)
     write_scene(out_dir, scene, metadata=_metadata(contents, usd_path, exact))
     log.info("imported %s -> %s: %d faces, %d cameras, atlas %dx%d%s", usd_path, out_dir, len(mesh.faces),

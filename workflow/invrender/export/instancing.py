@@ -15,17 +15,15 @@ float32 rounding or two of the scene's positions (docs/export.md has the measure
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..scene.types import Mesh, SceneError
+from ..scene.types import Mesh
 from .geometry import MeshPiece, piece_of
 
-__all__ = ["Copy", "Duplicates", "read_poses", "check_poses", "find_duplicates"]
+__all__ = ["Copy", "Duplicates", "find_duplicates"]
 
 log = logging.getLogger(__name__)
 
@@ -50,47 +48,12 @@ class Duplicates:
         return mask
 
 
-def check_poses(doc, where) -> list[dict]:
-    """The registered instances of a poses document (DESIGN.md form), each with a 4x4 T."""
-    if not isinstance(doc, dict) or not isinstance(doc.get("instances"), list):
-        raise SceneError(where, "instances", "a list of {instance_id, registered, T_obj2world}")
-    out = []
-    for k, entry in enumerate(doc["instances"]):
-        field_name = f"instances[{k}]"
-        if not isinstance(entry, dict) or not isinstance(entry.get("instance_id"), int):
-            raise SceneError(where, f"{field_name}.instance_id", "an integer instance id")
-        try:
-            T = np.asarray(entry.get("T_obj2world"), np.float64)
-        except (TypeError, ValueError):
-            T = np.zeros(0)
-        if T.shape != (4, 4) or not np.isfinite(T).all() or not np.allclose(T[3], [0, 0, 0, 1]):
-            raise SceneError(where, f"{field_name}.T_obj2world", "a row-major 4x4 rigid transform [[R, t], [0, 1]]")
-        R = T[:3, :3]
-        if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
-            raise SceneError(where, f"{field_name}.T_obj2world", "a rotation in its upper 3x3 (rigid pose, no scale)")
-        if entry.get("registered", True):
-            out.append({"instance_id": entry["instance_id"], "T": T})
-    return out
-
-
-def read_poses(path) -> dict:
-    path = Path(path)
-    if not path.is_file():
-        raise SceneError(path, "(file)", "an existing poses.json (DESIGN.md: duplicates/poses.json)")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SceneError(path, "(document)", f"a readable JSON document ({exc})") from None
-    check_poses(doc, path)
-    return doc
-
-
 def _in_object_frame(piece: MeshPiece, T: np.ndarray) -> np.ndarray:
     return (piece.positions.astype(np.float64) - T[:3, 3]) @ T[:3, :3]  # R^T (p - t), row vectors
 
 
 def find_duplicates(mesh: Mesh, poses: list[dict], eligible: np.ndarray, tolerance: float) -> Duplicates | None:
-    """Copies of one object at the given poses (from `check_poses`), among the `eligible` faces
+    """Copies of one object at the given poses (from scene.poses.validate_poses), among the `eligible` faces
     (a copy with a face that is not, e.g. one that emits, is left plain). None if there are none."""
     if mesh.instance_ids is None or not poses:
         return None

@@ -42,3 +42,9 @@ COLMAP_PARAMS = "invrender:colmap:params"
 COLMAP_SIZE = "invrender:colmap:size"
 COLMAP_R = "invrender:colmap:R"
 COLMAP_T = "invrender:colmap:t"
+
+# v2 scenes (docs/scene-format.md): an object's Xform (role "object") keeps the object's name and
+# sidedness, a material its material set's name (prim names must be identifiers; these need not).
+OBJECT_NAME = "invrender:objectName"
+EMISSION_SIDES = "invrender:emissionSides"
+MATERIAL_SET = "invrender:materialSet"

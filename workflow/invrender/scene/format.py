@@ -1,4 +1,6 @@
-"""The scene directory: ``scene.json`` beside the mesh, the parameter maps and the cameras.
+"""The scene directory: ``scene.json`` beside the meshes, the parameter maps and the cameras.
+
+Version 1, one mesh and one atlas:
 
     scene/
       scene.json        {"format": "invrender-scene", "version": 1, "units": "meters", "up": "+Y",
@@ -8,6 +10,21 @@
       maps/kd.exr ...   kd, ks, ke RGB; ka, kw one channel (Y); all H x W
       maps/kg.exr       cube map (6 N, N, 3): faces +X, -X, +Y, -Y, +Z, -Z top to bottom
       cameras/          COLMAP text model (optional: a scene may have no cameras)
+
+Version 2, objects (a mesh in its own frame, a 4x4 transform, a material set) and material sets
+(each an atlas of its own size); objects naming one mesh file and one set are instances:
+
+    scene/
+      scene.json        {..., "version": 2, "objects": [{"name", "mesh", "transform", "material",
+                         "instance_id", "emission_sides"}, ...], "materials": {name: {"kd": ..., ...}},
+                         "kg": "maps/kg.exr", "cameras": "cameras"}
+      meshes/<object>.ply            one per distinct mesh
+      materials/<set>/kd.exr ...     kd, ks, ka, ke, kw of each set
+      maps/kg.exr
+
+A v2 scene loads packed (scene/packing.py): ``Scene.mesh`` and ``Scene.maps`` are the one
+world-space mesh and packed atlas the renderer reads, as for v1. docs/scene-format.md describes
+every field.
 
 ``load_scene`` validates everything before returning and raises one ``SceneError`` naming the
 file, the field and what was expected. ``write_scene`` validates the in-memory scene with the
@@ -27,7 +44,8 @@ from .atomic import atomic_dir
 from .cameras import _check_camera, read_cameras, write_colmap
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
-from .types import ATLAS_MAPS, MAP_CHANNELS, Maps, Scene, SceneError
+from .packing import check_transform, pack_scene, validate_objects
+from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Scene, SceneError, SceneObject
 
 __all__ = [
     "FORMAT",
@@ -39,6 +57,9 @@ __all__ = [
     "read_scene_json",
     "write_scene",
     "validate_maps",
+    "validate_atlas",
+    "validate_kg",
+    "check_transform",
     "kg_to_stacked",
     "kg_from_stacked",
 ]
@@ -59,6 +80,7 @@ MAP_RANGES = {
     "kw": (0.0, True, 1.0, True),
     "kg": (0.0, True, np.inf, False),
 }
+V2_KG = "maps/kg.exr"
 DEFAULT_FILES = {"mesh": "mesh.ply", "maps": {name: f"maps/{name}.exr" for name in MAP_NAMES}, "cameras": "cameras"}
 
 
@@ -118,6 +140,9 @@ def _schema_error(file: Path, error) -> SceneError:
     field = _json_path(parts) or "(document)"
     if kind == "const":
         return SceneError(file, field, f"{_short(error.validator_value)}, got {_short(error.instance)}")
+    if kind == "enum":
+        options = ", ".join(_short(v) for v in error.validator_value)
+        return SceneError(file, field, f"one of {options}, got {_short(error.instance)}")
     if kind == "type":
         return SceneError(file, field, f"a JSON {error.validator_value}, got {_short(error.instance)}")
     if kind in ("pattern", "minLength") and error.schema == _validator().schema["$defs"]["relative_path"]:
@@ -165,9 +190,9 @@ def _texel(index: tuple, channels: int) -> str:
     return text + ")"
 
 
-def _check_map(name: str, data: np.ndarray, file) -> np.ndarray:
+def _check_map(name: str, data: np.ndarray, file, field: str | None = None) -> np.ndarray:
     """Channel count, finiteness and range of one map in its on-disk layout (H, W[, 3])."""
-    field = f"maps.{name}"
+    field = field or f"maps.{name}"
     want = CHANNELS[name]
     a = np.asarray(data)
     if a.ndim == 3 and a.shape[2] == 1 and want == 1:
@@ -194,30 +219,39 @@ def _check_map(name: str, data: np.ndarray, file) -> np.ndarray:
     return a
 
 
-def validate_maps(maps: dict, files: dict) -> Maps:
-    """Check maps given in their on-disk layout (kg stacked (6 N, N, 3)); return ``Maps``.
-
-    ``files[name]`` is the file named in the errors for that map.
-    """
-    checked = {name: _check_map(name, maps[name], files[name]) for name in MAP_NAMES}
+def validate_atlas(maps: dict, files: dict, prefix: str = "maps") -> Atlas:
+    """Check the five atlas maps (each map's channels, values and the common size); return them.
+    ``files[name]`` is the file named in the errors, ``prefix`` the JSON field above the maps."""
+    checked = {name: _check_map(name, maps[name], files[name], f"{prefix}.{name}") for name in ATLAS_MAPS}
     ref = checked["kd"].shape[:2]
     for name in ATLAS_MAPS:
         shape = checked[name].shape[:2]
         if shape != ref:
             raise SceneError(
-                files[name], f"maps.{name}",
-                f"the size of maps.kd (map size mismatch: {name} is {shape[0]}x{shape[1]}, kd is {ref[0]}x{ref[1]}, H x W)",
+                files[name], f"{prefix}.{name}",
+                f"the size of {prefix}.kd (map size mismatch: {name} is {shape[0]}x{shape[1]}, kd is {ref[0]}x{ref[1]}, H x W)",
             )
-    h, w = checked["kg"].shape[:2]
+    return Atlas(**checked)
+
+
+def validate_kg(stacked: np.ndarray, file, field: str = "maps.kg") -> np.ndarray:
+    """Check a cube map in its on-disk layout (6 N, N, 3); return it as (6, N, N, 3)."""
+    checked = _check_map("kg", stacked, file, field)
+    h, w = checked.shape[:2]
     if h != 6 * w:
         raise SceneError(
-            files["kg"], "maps.kg",
-            f"a cube map of 6 N x N texels (faces +X, -X, +Y, -Y, +Z, -Z stacked vertically), got {h}x{w}",
+            file, field, f"a cube map of 6 N x N texels (faces +X, -X, +Y, -Y, +Z, -Z stacked vertically), got {h}x{w}",
         )
-    return Maps(
-        kd=checked["kd"], ks=checked["ks"], ka=checked["ka"], ke=checked["ke"], kw=checked["kw"],
-        kg=kg_from_stacked(checked["kg"]),
-    )
+    return kg_from_stacked(checked)
+
+
+def validate_maps(maps: dict, files: dict) -> Maps:
+    """Check maps given in their on-disk layout (kg stacked (6 N, N, 3)); return ``Maps``.
+
+    ``files[name]`` is the file named in the errors for that map.
+    """
+    atlas = validate_atlas(maps, files)
+    return Maps(**{name: getattr(atlas, name) for name in ATLAS_MAPS}, kg=validate_kg(maps["kg"], files["kg"]))
 
 
 def _maps_on_disk_layout(maps: Maps, kg_file) -> dict:
@@ -236,24 +270,26 @@ def _maps_on_disk_layout(maps: Maps, kg_file) -> dict:
 # ---------------------------------------------------------------------------- load / write
 
 
+def _check_refs(directory: Path, file: Path, refs: dict) -> None:
+    """Every referenced file (the cameras: path) exists, before any is read."""
+    for field, rel in refs.items():
+        target = directory / rel
+        ok = target.exists() if field == "cameras" else target.is_file()
+        if not ok:
+            raise SceneError(file, field, f"an existing {'path' if field == 'cameras' else 'file'}: {target} does not exist")
+
+
 def load_scene(directory) -> Scene:
-    """Read and validate a scene directory. Raises ``SceneError`` on the first problem."""
+    """Read and validate a scene directory (version 1 or 2). Raises ``SceneError`` on the first problem."""
     directory = Path(directory)
     doc = read_scene_json(directory)
+    if doc["version"] == 2:
+        return _load_v2(directory, doc)
     file = directory / SCENE_JSON
-
-    # Every referenced file must exist before any is read.
     refs = {"mesh": doc["mesh"], **{f"maps.{k}": v for k, v in doc["maps"].items()}}
     if "cameras" in doc:
         refs["cameras"] = doc["cameras"]
-    for field, rel in refs.items():
-        target = directory / rel
-        if field == "cameras":
-            ok = target.exists()
-        else:
-            ok = target.is_file()
-        if not ok:
-            raise SceneError(file, field, f"an existing {'path' if field == 'cameras' else 'file'}: {target} does not exist")
+    _check_refs(directory, file, refs)
 
     mesh = read_mesh(directory / doc["mesh"], require_uvs=True)
     map_files = {name: directory / doc["maps"][name] for name in MAP_NAMES}
@@ -262,14 +298,47 @@ def load_scene(directory) -> Scene:
     return Scene(mesh=mesh, maps=maps, cameras=cameras, path=directory)
 
 
+def _load_v2(directory: Path, doc: dict) -> Scene:
+    file = directory / SCENE_JSON
+    refs = {f"objects[{k}].mesh": entry["mesh"] for k, entry in enumerate(doc["objects"])}
+    for name, files in doc["materials"].items():
+        refs.update({f"materials.{name}.{m}": rel for m, rel in files.items()})
+    refs["kg"] = doc["kg"]
+    if "cameras" in doc:
+        refs["cameras"] = doc["cameras"]
+    _check_refs(directory, file, refs)
+
+    meshes = {}  # one Mesh per file: objects naming the same file are instances of one mesh
+    for rel in dict.fromkeys(entry["mesh"] for entry in doc["objects"]):
+        meshes[rel] = read_mesh(directory / rel, require_uvs=True)
+    materials = {}
+    for name, rels in doc["materials"].items():
+        files = {m: directory / rel for m, rel in rels.items()}
+        materials[name] = validate_atlas({m: read_image(path) for m, path in files.items()}, files, f"materials.{name}")
+    objects = [
+        SceneObject(name=entry["name"], mesh=meshes[entry["mesh"]], material=entry["material"],
+                    transform=check_transform(entry.get("transform", np.eye(4).tolist()), file, f"objects[{k}].transform"),
+                    instance_id=entry.get("instance_id"), emission_sides=entry.get("emission_sides", "two"))
+        for k, entry in enumerate(doc["objects"])
+    ]
+    validate_objects(objects, materials, file)
+    kg = validate_kg(read_image(directory / doc["kg"]), directory / doc["kg"], "kg")
+    cameras = read_cameras(directory / doc["cameras"]) if "cameras" in doc else []
+    return pack_scene(objects, materials, kg, cameras, path=directory)
+
+
 def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
-    """Validate ``scene`` and write it as a scene directory, atomically.
+    """Validate ``scene`` and write it as a scene directory, atomically: version 2 if it has
+    objects (its material sets unpacked from ``scene.maps``: what is rendered is what is
+    written), else version 1.
 
     The directory is built beside the target and renamed into place, so an existing scene
     is replaced whole and a failure leaves no partial directory. ``metadata`` (JSON-serialisable)
     goes to scene.json's ``metadata``. Cameras are written only if the scene has some.
     """
     directory = Path(directory)
+    if scene.objects:
+        return _write_v2(directory, scene, metadata)
     files = {"mesh": directory / DEFAULT_FILES["mesh"]}
     files.update({name: directory / rel for name, rel in DEFAULT_FILES["maps"].items()})
 
@@ -287,6 +356,12 @@ def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
         "mesh": DEFAULT_FILES["mesh"],
         "maps": dict(DEFAULT_FILES["maps"]),
     }
+    _write_dir(directory, scene, doc, metadata, {DEFAULT_FILES["mesh"]: scene.mesh},
+               {DEFAULT_FILES["maps"][name]: disk_maps[name] for name in MAP_NAMES})
+
+
+def _write_dir(directory: Path, scene: Scene, doc: dict, metadata, meshes: dict, images: dict) -> None:
+    """Finish scene.json (cameras, metadata), check it, then write every file atomically."""
     if scene.cameras:
         doc["cameras"] = DEFAULT_FILES["cameras"]
     if metadata is not None:
@@ -295,9 +370,40 @@ def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"  # fails here, before anything is written
 
     with atomic_dir(directory) as tmp:
-        write_ply(tmp / DEFAULT_FILES["mesh"], scene.mesh)
-        for name in MAP_NAMES:
-            write_exr(tmp / DEFAULT_FILES["maps"][name], disk_maps[name])
+        for rel, mesh in meshes.items():
+            write_ply(tmp / rel, mesh)
+        for rel, image in images.items():
+            write_exr(tmp / rel, image)
         if scene.cameras:
             write_colmap(tmp / DEFAULT_FILES["cameras"], scene.cameras)
         (tmp / SCENE_JSON).write_text(text, encoding="utf-8")
+
+
+def _write_v2(directory: Path, scene: Scene, metadata) -> None:
+    file = directory / SCENE_JSON
+    materials = scene.packing.unpack_atlas(scene.maps)
+    validate_objects(scene.objects, materials, file)
+    images, mesh_files, entries = {}, {}, []
+    for name, atlas in materials.items():
+        rels = {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS}
+        validate_atlas({m: getattr(atlas, m) for m in ATLAS_MAPS}, {m: directory / r for m, r in rels.items()},
+                       f"materials.{name}")
+        images.update({rels[m]: getattr(atlas, m) for m in ATLAS_MAPS})
+    for obj in scene.objects:
+        if id(obj.mesh) not in mesh_files:  # a mesh shared by objects is written once
+            mesh_files[id(obj.mesh)] = (f"meshes/{obj.name}.ply", obj.mesh)
+            validate_mesh(obj.mesh, directory / mesh_files[id(obj.mesh)][0], require_uvs=True)
+        entry = {"name": obj.name, "mesh": mesh_files[id(obj.mesh)][0],
+                 "transform": np.asarray(obj.transform, np.float64).tolist(), "material": obj.material}
+        if obj.instance_id is not None:
+            entry["instance_id"] = int(obj.instance_id)
+        entries.append({**entry, "emission_sides": obj.emission_sides})
+    kg_file = directory / V2_KG
+    images[V2_KG] = _maps_on_disk_layout(scene.maps, kg_file)["kg"]
+    validate_kg(images[V2_KG], kg_file, "kg")
+    for cam in scene.cameras:
+        _check_camera(cam, directory / DEFAULT_FILES["cameras"])
+    doc = {"format": FORMAT, "version": 2, "units": "meters", "up": "+Y", "objects": entries,
+           "materials": {name: {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS} for name in materials},
+           "kg": V2_KG}
+    _write_dir(directory, scene, doc, metadata, dict(mesh_files.values()), images)

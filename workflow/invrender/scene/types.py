@@ -29,6 +29,7 @@ class Mesh:
     faces: np.ndarray  # (F, 3) int32, counter-clockwise seen from the front
     uvs: np.ndarray  # (V, 2) float32 atlas coordinates in [0, 1], v up
     instance_ids: np.ndarray | None = None  # (F,) int32, 0 = no instance
+    one_sided: np.ndarray | None = None  # (F,) bool: emits from its front only; None = all two-sided
 
     @property
     def triangle_count(self) -> int:
@@ -36,27 +37,42 @@ class Mesh:
 
 
 @dataclass
-class Maps:
-    """MILO's six parameter maps. Atlas maps share one (H, W); kg is a (6, N, N, 3) cube map."""
+class Atlas:
+    """MILO's five atlas maps of one material set, all of one (H, W)."""
 
     kd: np.ndarray  # (H, W, 3) diffuse albedo
     ks: np.ndarray  # (H, W, 3) specular albedo (reflectance at normal incidence)
     ka: np.ndarray  # (H, W) Beckmann alpha^2
     ke: np.ndarray  # (H, W, 3) emitted radiance
     kw: np.ndarray  # (H, W) window map in [0, 1]
-    kg: np.ndarray  # (6, N, N, 3) outdoor radiance by direction
 
     @property
     def atlas_shape(self) -> tuple[int, int]:
         return self.kd.shape[:2]
 
     @classmethod
-    def uniform(cls, size=(64, 64), kd=0.5, ks=0.0, ka=0.1, ke=0.0, kw=0.0, kg=0.0, cube=8):
+    def uniform(cls, size=(64, 64), kd=0.5, ks=0.0, ka=0.1, ke=0.0, kw=0.0):
         h, w = size
         rgb = lambda value: np.broadcast_to(np.asarray(value, np.float32), (h, w, 3)).copy()
         one = lambda value: np.full((h, w), value, np.float32)
+        return cls(kd=rgb(kd), ks=rgb(ks), ka=one(ka), ke=rgb(ke), kw=one(kw))
+
+
+@dataclass
+class Maps(Atlas):
+    """MILO's six parameter maps: the atlas maps and kg, a (6, N, N, 3) cube map."""
+
+    kg: np.ndarray  # (6, N, N, 3) outdoor radiance by direction
+
+    @classmethod
+    def uniform(cls, size=(64, 64), kd=0.5, ks=0.0, ka=0.1, ke=0.0, kw=0.0, kg=0.0, cube=8):
+        atlas = Atlas.uniform(size, kd, ks, ka, ke, kw)
         kg_map = np.broadcast_to(np.asarray(kg, np.float32), (6, cube, cube, 3)).copy()
-        return cls(kd=rgb(kd), ks=rgb(ks), ka=one(ka), ke=rgb(ke), kw=one(kw), kg=kg_map)
+        return cls(**{name: getattr(atlas, name) for name in ATLAS_MAPS}, kg=kg_map)
+
+    @property
+    def atlas(self) -> Atlas:
+        return Atlas(**{name: getattr(self, name) for name in ATLAS_MAPS})
 
 
 @dataclass
@@ -96,9 +112,42 @@ class Camera:
         return m
 
 
+EMISSION_SIDES = ("two", "one")  # an object's emission: from both sides (captured meshes), or its front only
+
+
+@dataclass
+class SceneObject:
+    """One placement of a mesh in a v2 scene (docs/scene-format.md).
+
+    The mesh is in the object's own frame with UVs in its material set's own atlas; `transform`
+    takes it to the world. Objects that share a Mesh (the same Python object) and a material set
+    are instances of one object: their texels are the same texels.
+    """
+
+    name: str
+    mesh: Mesh
+    material: str  # a key of the scene's material sets
+    transform: np.ndarray = field(default_factory=lambda: np.eye(4))  # (4, 4) float64 object-to-world
+    instance_id: int | None = None  # every face's instance id; None: the mesh's own (v1 scenes)
+    emission_sides: str = "two"
+
+
 @dataclass
 class Scene:
+    """What the renderer reads: one world-space mesh and one atlas (`mesh`, `maps`).
+
+    A v2 scene (`objects` non-empty) also keeps its objects and the `packing` (scene/packing.py)
+    that laid their material sets into `maps` and flattened them into `mesh`; its per-set maps
+    are `packing.unpack_atlas(maps)`.
+    """
+
     mesh: Mesh
     maps: Maps
     cameras: list[Camera] = field(default_factory=list)
     path: Path | None = None  # the scene directory it was loaded from, if any
+    objects: list[SceneObject] = field(default_factory=list)
+    packing: object | None = None  # scene.packing.Packing of a v2 scene
+
+    @property
+    def version(self) -> int:
+        return 2 if self.objects else 1

@@ -20,7 +20,6 @@ The directory is built beside ``out_dir`` and renamed into place only when compl
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import Callable
@@ -31,6 +30,7 @@ from tqdm import tqdm
 from ..scene.atomic import atomic_dir
 from ..scene.cameras import write_colmap
 from ..scene.format import write_scene
+from ..scene.poses import write_poses
 from ..scene.images import write_exr, write_mask, write_png_preview
 from ..scene.mesh_io import write_ply
 from ..scene.types import Mesh, Scene
@@ -102,8 +102,7 @@ def write_capture(
         if "poses" in metadata:
             from .duplicates import object_mesh
 
-            text = json.dumps(metadata["poses"], indent=2, allow_nan=False) + "\n"
-            (truth / "poses.json").write_text(text, encoding="utf-8")
+            write_poses(truth / "poses.json", metadata["poses"])
             write_ply(truth / "object.ply", object_mesh(scene, metadata))
     log.info("wrote %s: %d views at %d spp", out_dir, len(scene.cameras), spp)
 
