@@ -36,7 +36,7 @@ from .cameras import author_camera, author_render_product
 from .check import validate_usd
 from .geometry import MeshPiece, author_mesh, connected_faces, piece_of, write_indices
 from .instancing import Duplicates, check_poses, find_duplicates, read_poses
-from .lights import author_dome, author_mesh_light, cube_to_latlong, mean_radiance
+from .lights import author_dome, author_mesh_light, mean_radiance, write_sky
 from .materials import TEXTURES, author_material, write_textures
 
 __all__ = ["Part", "plan_parts", "export_usd", "write_stage"]
@@ -169,7 +169,7 @@ def write_stage(path: Path, scene: Scene, parts: list[Part], duplicates: Duplica
                                           duplicates.prototype.faces, copy.face_ids, copy.vertex_ids, copy.instance_id))
 
     if np.any(scene.maps.kg > 0):
-        author_dome(stage, f"{ROOT}/Lights/sky", files["sky"], scene.maps.kg.shape[1])
+        author_dome(stage, f"{ROOT}/Lights/sky", files["sky"], scene.maps.kg.shape[1], files["sky_cube"])
 
     if scene.cameras:
         UsdGeom.Scope.Define(stage, f"{ROOT}/Cameras")
@@ -214,8 +214,7 @@ def export_usd(scene_dir, out_dir, usdc: bool = False, poses=None, instancing: b
         with atomic_dir(out_dir) as tmp:
             files = write_textures(scene.maps, tmp / TEXTURES)
             if np.any(scene.maps.kg > 0):
-                write_exr(tmp / TEXTURES / "sky_latlong.exr", cube_to_latlong(scene.maps.kg))
-                files["sky"] = f"./{TEXTURES}/sky_latlong.exr"
+                files.update(write_sky(scene.maps.kg, tmp, TEXTURES))
             stage = write_stage(tmp / "scene.usda", scene, parts, duplicates, names, files)
             layers = ["scene.usda", "scene.usdc"] if usdc else ["scene.usda"]
             _save(stage, tmp, layers)

@@ -41,7 +41,9 @@ FACES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 
 
 def _normalize(v):
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    """v / |v| along the last axis, for v of length >= 1e-150 (the cube's directions have a
+    largest component of 1, so this is render/bsdf.normalize's result to the bit)."""
+    return v / np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
 
 
 # --------------------------------------------------------------------------------------------
@@ -207,6 +209,7 @@ def latlong_solid_angles(width: int, height: int) -> np.ndarray:
 
 GAUSS_NODES = 2  # per interval between breakpoints
 COLUMN_SPLIT = 2  # each pixel column cut in parts, so that a row edge crossing b_m(x) costs little
+MIN_INTERVALS = 1024  # at least as many intervals over 2 pi, for coarse images: b_m(x) curves near the poles
 
 
 def _dome(rotation) -> np.ndarray:
@@ -248,7 +251,8 @@ def _nodes(n: int, width: int, rotation) -> tuple[np.ndarray, np.ndarray]:
     face, s, t = np.meshgrid(np.arange(6), e, e, indexing="ij")
     corners = cube_to_direction(face, s, t).reshape(-1, 3) @ _dome(rotation)
     breaks = np.unique(np.concatenate([np.arctan2(corners[:, 0], corners[:, 2]),
-                                       _column_edges(width, COLUMN_SPLIT), [-np.pi, np.pi]]))
+                                       _column_edges(width, COLUMN_SPLIT),
+                                       np.linspace(-np.pi, np.pi, MIN_INTERVALS + 1)]))
     breaks = breaks[(breaks >= -np.pi) & (breaks <= np.pi)]
     lo, hi = breaks[:-1], breaks[1:]
     keep = hi > lo
