@@ -119,7 +119,8 @@ def test_cube_round_trip_and_texel_convention():
     assert np.array_equal(cm.kg_to_stacked(kg), np.concatenate(list(kg)))
     assert np.array_equal(cm.kg_from_stacked(cm.kg_to_stacked(kg)), kg)
     assert np.array_equal(cm.lookup_cube(kg.reshape(6 * n, n, 3), d), kg[face, row, col])
-    assert np.array_equal(cm.texel_directions(n)[face, row, col], cm.cube_to_direction(face, (col + 0.5) / n, (row + 0.5) / n))
+    centres = cm.cube_to_direction(face, (col + 0.5) / n, (row + 0.5) / n)
+    assert np.array_equal(cm.texel_directions(n)[face, row, col], centres)
 
 
 def test_cube_texel_solid_angles_are_exact():
@@ -269,6 +270,20 @@ def test_a_sun_off_the_axes_lands_in_the_texel_of_its_direction():
         cube[f, row, col] = 1.0
         back = cm.cube_to_latlong(cube, width, height)[..., 0]
         assert back[i, j] == pytest.approx(1.0)  # the pixel lies inside the texel
+
+
+@pytest.mark.parametrize("n", [5, 16])
+def test_a_tilted_dome_keeps_the_light_and_puts_the_sun_where_it_turns(n):
+    """`rotation` (dome-to-world) at no axis of the cube: the texel edges cross the meridians at any
+    angle, and still the light is kept and the sun lands in the texel of R sun."""
+    axis, angle = _unit([0.3, -0.8, 0.5]), np.radians(37.0)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rotation = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k  # Rodrigues
+    sky = sky_with_sun(512, 256)
+    kg = cm.latlong_to_cube(sky, n, rotation=rotation)
+    assert np.allclose(totals(kg, cube_cells(n, 1))[0], totals(sky, latlong_cells(512, 256))[0], rtol=1e-6, atol=0)
+    f, s, t = cm.direction_to_cube(rotation @ SUN)
+    assert np.unravel_index(np.argmax(kg[..., 0]), kg.shape[:3]) == (f, *cm.cube_texel(s, t, n))
 
 
 def test_tiny_images_are_refused():

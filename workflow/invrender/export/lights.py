@@ -104,7 +104,8 @@ def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str, 
         return cube * scale
     image = read_image(file.resolvedPath)
     if image.shape[0] < 2 or image.shape[1] < 2:
-        raise SceneError(file.resolvedPath, f"{prim.GetPath()} inputs:texture:file", "a lat-long image of at least 2 x 2 pixels")
+        raise SceneError(file.resolvedPath, f"{prim.GetPath()} inputs:texture:file",
+                         "a lat-long image of at least 2 x 2 pixels")
     image = np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
     return latlong_to_cube(image, n, rotation if turned else None) * scale
 
@@ -118,7 +119,8 @@ def _exact_cube(prim: Usd.Prim, texture: str) -> np.ndarray | None:
         return None
     stacked = read_image(cube.resolvedPath)
     if stacked.ndim != 3 or stacked.shape[0] != 6 * stacked.shape[1] or stacked.shape[2] != 3:
-        raise SceneError(cube.resolvedPath, f"{prim.GetPath()} {schema.CUBE}", f"a cube map of shape (6 N, N, 3), got {stacked.shape}")
+        raise SceneError(cube.resolvedPath, f"{prim.GetPath()} {schema.CUBE}",
+                         f"a cube map of shape (6 N, N, 3), got {stacked.shape}")
     return kg_from_stacked(stacked.astype(np.float32))
 
 
