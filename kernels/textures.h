@@ -1,7 +1,7 @@
 #line 2 "textures.h"
 /* Parameter-map lookups: nearest texel of the atlas maps (column floor(u W), row
  * floor((1 - v) H), v up) and of the kg cube map (OpenGL face orientation, faces +X -X +Y -Y
- * +Z -Z). Reference: workflow/invrender/render/sampling.py (direction_to_cube). Nearest texels
+ * +Z -Z). Reference: workflow/invrender/scene/cubemap.py (direction_to_cube). Nearest texels
  * make every map value a plain parameter, so the gradient of a pixel lands on whole texels. */
 #ifndef INVRENDER_TEXTURES_H
 #define INVRENDER_TEXTURES_H

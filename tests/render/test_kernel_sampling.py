@@ -12,6 +12,7 @@ from invrender.render import bsdf as bsdf_ref
 from invrender.render import sampling as ref
 from invrender.render.features import Features
 from invrender.render.scene_buffers import emitted_power
+from invrender.scene import cubemap
 from invrender.scene.types import Maps, Mesh, Scene
 
 X = np.array([0.0, 0.0, 0.0])  # the shading point, on the floor
@@ -23,7 +24,7 @@ CASES = 6  # chi-square tests in this file, for the Sidak correction
 def sky_with_sun(n=8):
     """A cube map with a gradient sky, a dark ground and one bright sun texel."""
     faces, s, t = np.meshgrid(np.arange(6), (np.arange(n) + 0.5) / n, (np.arange(n) + 0.5) / n, indexing="ij")
-    d = ref.cube_to_direction(faces, s.transpose(0, 2, 1), t.transpose(0, 2, 1))
+    d = cubemap.cube_to_direction(faces, s.transpose(0, 2, 1), t.transpose(0, 2, 1))
     up = d[..., 1]
     kg = np.where(up[..., None] > 0, np.array([0.4, 0.6, 1.0]) * (0.5 + up[..., None]), 0.05)
     kg[2, n // 2, n // 3] = 20.0  # sun on the +Y face
@@ -108,8 +109,8 @@ def test_chi_square_rejects_a_wrong_density():
                                      rng.uniform(0, 1, (n, 4)).astype(np.float32))[0].astype(np.float64)
 
     def no_jacobian(d):
-        face, s, t = ref.direction_to_cube(d)
-        row, col = ref.cube_texel(s, t, env.n)
+        face, s, t = cubemap.direction_to_cube(d)
+        row, col = cubemap.cube_texel(s, t, env.n)
         return env.prob[(face * env.n + row) * env.n + col] / (4.0 * np.pi / (6 * env.n**2))
 
     assert not chi2_test(sample, no_jacobian, n_samples=200_000)

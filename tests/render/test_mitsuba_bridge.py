@@ -10,7 +10,7 @@ import pytest
 import invrender.render.mitsuba_bridge as mb  # isort: skip
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
-from invrender.render.sampling import cube_to_direction, direction_to_cube, lookup_cube  # noqa: E402
+from invrender.scene.cubemap import cube_to_direction, direction_to_cube, lookup_cube  # noqa: E402
 from invrender.scene.types import Camera, Maps, Mesh, Scene  # noqa: E402
 
 LLVM = "llvm_ad_rgb"

@@ -5,7 +5,7 @@ import numpy as np
 
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer
-from invrender.render.sampling import cube_texel, direction_to_cube, lookup_cube
+from invrender.scene.cubemap import cube_texel, direction_to_cube, lookup_cube
 from invrender.scene.cameras import cube_face_cameras
 from invrender.scene.types import Maps, Mesh, Scene
 

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from invrender.render import bsdf, rng, sampling
 from invrender.render.bsdf import dot, normalize
+from invrender.scene import cubemap
 
 # Sidak correction over the chi-square tests in this file that must accept (cosine 2,
 # specular 5, environment 1, emitters 1, mixture 2).
@@ -103,53 +104,6 @@ def test_branchless_onb_is_orthonormal_and_right_handed():
         assert np.allclose(s1, b1[i], atol=0, rtol=1e-15) and np.allclose(s2, b2[i], atol=0, rtol=1e-15)
     v = gen.normal(size=(1000, 3))
     assert np.allclose(bsdf.to_world(n[:1000], bsdf.to_local(n[:1000], v)), v)
-
-
-def test_cube_faces_follow_the_opengl_table():
-    # centre of each face, then a step along +sc and along +tc (table 3.21)
-    cases = {  # face: (major direction, direction of +sc, direction of +tc)
-        0: ([1, 0, 0], [0, 0, -1], [0, -1, 0]),
-        1: ([-1, 0, 0], [0, 0, 1], [0, -1, 0]),
-        2: ([0, 1, 0], [1, 0, 0], [0, 0, 1]),
-        3: ([0, -1, 0], [1, 0, 0], [0, 0, -1]),
-        4: ([0, 0, 1], [1, 0, 0], [0, -1, 0]),
-        5: ([0, 0, -1], [-1, 0, 0], [0, -1, 0]),
-    }
-    for face, (major, sc, tc) in cases.items():
-        major, sc, tc = map(np.array, (major, sc, tc))
-        f, s, t = sampling.direction_to_cube(major)
-        assert (f, s, t) == (face, 0.5, 0.5)
-        f, s, t = sampling.direction_to_cube(major + 0.5 * sc + 0.25 * tc)
-        assert f == face and s == pytest.approx(0.75) and t == pytest.approx(0.625)
-        assert np.allclose(sampling.cube_to_direction(face, 0.75, 0.625),
-                           normalize(major + 0.5 * sc + 0.25 * tc))
-
-
-def test_cube_round_trip_and_texel_convention():
-    gen = np.random.default_rng(1)
-    d = normalize(gen.normal(size=(100_000, 3)))
-    face, s, t = sampling.direction_to_cube(d)
-    assert np.abs(sampling.cube_to_direction(face, s, t) - d).max() < 1e-14
-    assert s.min() >= 0 and s.max() <= 1 and t.min() >= 0 and t.max() <= 1
-    n = 8
-    kg = gen.uniform(size=(6, n, n, 3))
-    row, col = np.floor(t * n).astype(int), np.floor(s * n).astype(int)
-    assert np.array_equal(sampling.lookup_cube(kg, d), kg[face, row, col])
-    # the stacked EXR layout (6 N, N, C): faces top to bottom
-    assert np.array_equal(sampling.lookup_cube(kg.reshape(6 * n, n, 3), d), kg[face, row, col])
-
-
-def test_cube_texel_solid_angles_are_exact():
-    for n in (1, 3, 16):
-        assert 6 * sampling.cube_texel_solid_angles(n).sum() == pytest.approx(4 * np.pi, rel=1e-14)
-    # one texel against a dense midpoint integral of the gnomonic Jacobian (1 + u^2 + v^2)^-1.5
-    n, r, c = 4, 0, 2
-    m = 2000
-    g = (np.arange(m) + 0.5) / m
-    u = -1 + 2 * (c + g[None, :]) / n
-    v = -1 + 2 * (r + g[:, None]) / n
-    numeric = np.sum((1 + u * u + v * v) ** -1.5) * (2 / n / m) ** 2
-    assert sampling.cube_texel_solid_angles(n)[r, c] == pytest.approx(numeric, rel=1e-6)
 
 
 # --------------------------------------------------------------------------------------------
@@ -369,7 +323,7 @@ def test_chi2_environment():
     assert_accepted(res)
     assert res.integral == pytest.approx(1.0, abs=1e-4)
     d = sample(200_000)
-    assert np.all(sampling.direction_to_cube(d)[0] != 1)  # zero-probability texels never drawn
+    assert np.all(cubemap.direction_to_cube(d)[0] != 1)  # zero-probability texels never drawn
 
 
 def test_environment_all_black_falls_back_to_uniform():
@@ -429,7 +383,7 @@ def test_chi2_rejects_wrong_pdfs():
     env = sampling.EnvironmentDistribution(sky_with_sun())
 
     def no_jacobian(d):  # P / (2/N)^2 without the gnomonic factor (1 + u^2 + v^2)^(3/2)
-        _, s_, t_ = sampling.direction_to_cube(d)
+        _, s_, t_ = cubemap.direction_to_cube(d)
         return env.pdf(d) / (1 + (2 * s_ - 1) ** 2 + (2 * t_ - 1) ** 2) ** 1.5
 
     res = chi2_test(lambda k: env.sample(*uniforms(k, seed=26)[:3]), no_jacobian, N_REJECT)

@@ -120,7 +120,7 @@ def test_every_centroid_texel_is_covered_or_dilated(room):
 
 def test_environment_sky_ground_sun(room):
     scene, meta = room
-    from invrender.render.sampling import cube_to_direction
+    from invrender.scene.cubemap import cube_to_direction
 
     kg = scene.maps.kg
     n = kg.shape[1]

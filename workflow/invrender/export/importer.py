@@ -9,7 +9,8 @@ into a scene directory.
   whose material says something else for a map (another texture, a constant: an edit) has that
   map re-baked into the texels under its faces. A mesh light whose colour x intensity no longer
   is the mean radiance of its emission has its ke scaled to match.
-- kg: the DomeLight's lat-long texture resampled to the cube (exact for the export's sizes).
+- kg: the export's exact cube map while the DomeLight's texture is the export's, else the
+  lat-long texture resampled to the cube (area-weighted: scene/cubemap.py).
 - Cameras: every UsdGeom.Camera (cameras.py), the exact COLMAP camera where it is untouched.
 - Duplicates: instances become poses again (scene.json metadata `poses`, DESIGN.md form), so the
   next export instances them again; the names of prims become instance names.
@@ -111,7 +112,7 @@ def read_stage(stage: Usd.Stage, where: str, exact: bool = True, meshes: bool = 
             _read_mesh_prim(prim, to_scene, contents, where, exact)
         elif (prim.IsA(UsdLux.DomeLight) or prim.IsA(UsdLux.DomeLight_1)) and contents.kg is None:
             if UsdGeom.Imageable(prim).ComputeVisibility() != UsdGeom.Tokens.invisible:
-                contents.kg = read_dome(prim, to_scene, DEFAULT_CUBE, where)
+                contents.kg = read_dome(prim, to_scene, DEFAULT_CUBE, where, exact)
         elif prim.IsA(UsdGeom.Camera) and not prim.IsInstanceProxy():
             contents.cameras.append(read_camera(prim, to_scene, resolutions.get(prim.GetPath()), where, exact))
     return contents

@@ -14,10 +14,10 @@ The DomeLight's lat-long texture follows the UsdLux specification (the OpenEXR o
 (column j, row i) of a W x H (= 2H x H) image holds the radiance arriving from direction
 d = (sin(lon) cos(lat), sin(lat), cos(lon) cos(lat)) with lon = pi - 2 pi j / (W - 1) and
 lat = pi / 2 - pi i / (H - 1): +Y up, the image centre looking along +Z, a quarter from the left
-along +X, the left and right edges along -Z. Mitsuba's `envmap` (render/mitsuba_bridge.py) has
-the same orientation and rows but places column j at (j + 1/2) / W, so its image is resampled
-here rather than reused. Renderers that filter the texture place pixel centres at (j + 1/2) / W
-too; with 8 lat-long columns per cube texel at the horizon that half pixel is 1/16 of a texel.
+along +X, the left and right edges along -Z. It is kg resampled area-weighted (scene/cubemap.py),
+so other tools get kg's total light; the exact cube goes beside it (`invrender:cube`), for the
+importer while the texture is still the one the export wrote. Mitsuba's `envmap`
+(render/mitsuba_bridge.py) has the same orientation and rows but places column j at (j + 1/2) / W.
 """
 
 from __future__ import annotations
@@ -25,62 +25,37 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
 
-from ..render.sampling import cube_to_direction, lookup_cube
-from ..scene.images import read_image
+from ..scene.cubemap import cube_to_latlong, kg_from_stacked, kg_to_stacked, latlong_to_cube
+from ..scene.images import read_image, write_exr
 from ..scene.regions import face_texels
 from ..scene.types import Mesh, Maps, SceneError
 from . import schema
 
-__all__ = ["latlong_size", "latlong_directions", "cube_to_latlong", "latlong_to_cube", "author_dome",
-           "read_dome", "mean_radiance", "author_mesh_light", "light_radiance"]
+__all__ = ["latlong_size", "write_sky", "author_dome", "read_dome", "mean_radiance", "author_mesh_light", "light_radiance"]
 
 LATLONG_PER_TEXEL = 32  # lat-long columns per cube texel row (8 per texel at the horizon)
 MIN_LATLONG_WIDTH = 512
+SKY_LATLONG, SKY_CUBE = "sky_latlong.exr", "sky_cube.exr"
 
 
 def latlong_size(n: int) -> tuple[int, int]:
-    """(width, height) of the lat-long texture of an N x N cube map: fine enough that each cube
-    texel's centre finds a pixel of its own texel (tests/export checks the round trip)."""
+    """(width, height) of the lat-long texture of an N x N cube map: fine enough that a texel's
+    edges blur over 1/16 of it at the horizon (a pixel straddling an edge takes the mean)."""
     width = max(MIN_LATLONG_WIDTH, LATLONG_PER_TEXEL * n)
     return width, width // 2
 
 
-def latlong_directions(width: int, height: int) -> np.ndarray:
-    """World direction of each pixel of a UsdLux lat-long texture: (height, width, 3)."""
-    lon = np.pi - 2.0 * np.pi * np.arange(width) / (width - 1)
-    lat = 0.5 * np.pi - np.pi * np.arange(height) / (height - 1)
-    lat, lon = np.meshgrid(lat, lon, indexing="ij")
-    return np.stack([np.sin(lon) * np.cos(lat), np.sin(lat), np.cos(lon) * np.cos(lat)], -1)
+def write_sky(kg: np.ndarray, root, folder: str) -> dict:
+    """Write kg as the DomeLight's lat-long texture and as the exact cube (stacked (6 N, N, 3))
+    into root/folder; return their asset paths {"sky": ..., "sky_cube": ...}."""
+    write_exr(root / folder / SKY_LATLONG, cube_to_latlong(kg, *latlong_size(kg.shape[1])))
+    write_exr(root / folder / SKY_CUBE, kg_to_stacked(kg))
+    return {"sky": f"./{folder}/{SKY_LATLONG}", "sky_cube": f"./{folder}/{SKY_CUBE}"}
 
 
-def cube_to_latlong(kg: np.ndarray, width: int | None = None) -> np.ndarray:
-    """The kg cube map as a UsdLux lat-long image (H, W, 3): the nearest cube texel per pixel."""
-    width, height = (width, width // 2) if width else latlong_size(kg.shape[1])
-    return lookup_cube(kg, latlong_directions(width, height)).astype(np.float32)
-
-
-def latlong_to_cube(image: np.ndarray, n: int, rotation: np.ndarray | None = None) -> np.ndarray:
-    """A lat-long image back to a (6, N, N, 3) cube map: each texel takes the pixel nearest its
-    centre's direction (in the dome's frame: `rotation` is dome-to-world). With the export's size
-    this is exactly the cube the image was made from."""
-    height, width = image.shape[:2]
-    face = np.repeat(np.arange(6), n * n).reshape(6, n, n)
-    row, col = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    d = cube_to_direction(face, np.broadcast_to((col + 0.5) / n, face.shape), np.broadcast_to((row + 0.5) / n, face.shape))
-    if rotation is not None:
-        d = d @ np.asarray(rotation, np.float64)  # world -> dome frame: R^T d, row vectors
-    lat = np.arcsin(np.clip(d[..., 1], -1.0, 1.0))
-    lon = np.arctan2(d[..., 0], d[..., 2])
-    j = np.clip(np.rint((np.pi - lon) * (width - 1) / (2.0 * np.pi)), 0, width - 1).astype(np.int64)
-    i = np.clip(np.rint((0.5 * np.pi - lat) * (height - 1) / np.pi), 0, height - 1).astype(np.int64)
-    channels = image[i, j]
-    if channels.shape[-1] == 1:
-        channels = np.repeat(channels, 3, axis=-1)
-    return np.ascontiguousarray(channels[..., :3], np.float32)
-
-
-def author_dome(stage: Usd.Stage, path: str, texture: str, n: int) -> UsdLux.DomeLight:
-    """The DomeLight of kg: radiance = the lat-long texture (colour 1, intensity 1, exposure 0)."""
+def author_dome(stage: Usd.Stage, path: str, texture: str, n: int, cube: str | None = None) -> UsdLux.DomeLight:
+    """The DomeLight of kg: radiance = the lat-long texture (colour 1, intensity 1, exposure 0);
+    `cube` the exact cube map beside it, valid while the texture is still `texture`."""
     dome = UsdLux.DomeLight.Define(stage, path)
     dome.CreateTextureFileAttr(texture)
     dome.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
@@ -90,6 +65,9 @@ def author_dome(stage: Usd.Stage, path: str, texture: str, n: int) -> UsdLux.Dom
     prim = dome.GetPrim()
     prim.CreateAttribute(schema.ROLE, Sdf.ValueTypeNames.Token, custom=True).Set("environment")
     prim.CreateAttribute(schema.CUBE_SIZE, Sdf.ValueTypeNames.Int, custom=True).Set(int(n))
+    if cube is not None:
+        prim.CreateAttribute(schema.CUBE, Sdf.ValueTypeNames.Asset, custom=True).Set(cube)
+        prim.CreateAttribute(schema.CUBE_SOURCE, Sdf.ValueTypeNames.String, custom=True).Set(texture)
     return dome
 
 
@@ -100,27 +78,50 @@ def _light_scale(light: UsdLux.LightAPI) -> np.ndarray:
     return color * float(get(light.GetIntensityAttr(), 1.0)) * 2.0 ** float(get(light.GetExposureAttr(), 0.0))
 
 
-def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str) -> np.ndarray:
+def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str, exact: bool = True) -> np.ndarray:
     """kg (6, N, N, 3) of a DomeLight (or DomeLight_1): its lat-long texture (or white) x colour x
-    intensity x 2^exposure, turned by the dome's rotation and pole axis."""
+    intensity x 2^exposure, turned by the dome's rotation and pole axis. With `exact`, the export's
+    own cube (`invrender:cube`) instead of the texture while the texture and the frame are the
+    export's."""
     dome = UsdLux.DomeLight(prim)  # DomeLight_1 has the same texture attributes
     n = prim.GetAttribute(schema.CUBE_SIZE).Get() if prim.HasAttribute(schema.CUBE_SIZE) else None
     n = int(n or default_n)
     scale = _light_scale(UsdLux.LightAPI(prim)).astype(np.float32)
-    file = dome.GetTextureFileAttr().Get()
-    if file is not None and file.path:
-        if not file.resolvedPath:
-            raise SceneError(where, f"{prim.GetPath()} inputs:texture:file", f"a texture that exists: {file.path}")
-        fmt = dome.GetTextureFormatAttr().Get()
-        if fmt not in (None, UsdLux.Tokens.automatic, UsdLux.Tokens.latlong):
-            raise SceneError(where, f"{prim.GetPath()} inputs:texture:format", f"latlong, got {fmt}")
-        image = read_image(file.resolvedPath)
-    else:
-        image = np.ones((2, 4, 3), np.float32)
     world = to_scene @ np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), np.float64).T
     u, _, vt = np.linalg.svd(world[:3, :3])
     rotation = u @ vt @ _pole_rotation(prim)
-    return latlong_to_cube(image, n, None if np.array_equal(rotation, np.eye(3)) else rotation) * scale
+    turned = not np.allclose(rotation, np.eye(3), rtol=0, atol=1e-12)
+    file = dome.GetTextureFileAttr().Get()
+    if file is None or not file.path:
+        return np.ones((6, n, n, 3), np.float32) * scale
+    if not file.resolvedPath:
+        raise SceneError(where, f"{prim.GetPath()} inputs:texture:file", f"a texture that exists: {file.path}")
+    fmt = dome.GetTextureFormatAttr().Get()
+    if fmt not in (None, UsdLux.Tokens.automatic, UsdLux.Tokens.latlong):
+        raise SceneError(where, f"{prim.GetPath()} inputs:texture:format", f"latlong, got {fmt}")
+    cube = _exact_cube(prim, file.path) if exact and not turned else None
+    if cube is not None:
+        return cube * scale
+    image = read_image(file.resolvedPath)
+    if image.shape[0] < 2 or image.shape[1] < 2:
+        raise SceneError(file.resolvedPath, f"{prim.GetPath()} inputs:texture:file",
+                         "a lat-long image of at least 2 x 2 pixels")
+    image = np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
+    return latlong_to_cube(image, n, rotation if turned else None) * scale
+
+
+def _exact_cube(prim: Usd.Prim, texture: str) -> np.ndarray | None:
+    """The export's cube map, if it names one and the texture is still the one it was made with."""
+    if not (prim.HasAttribute(schema.CUBE) and prim.HasAttribute(schema.CUBE_SOURCE)):
+        return None
+    cube = prim.GetAttribute(schema.CUBE).Get()
+    if prim.GetAttribute(schema.CUBE_SOURCE).Get() != texture or cube is None or not cube.resolvedPath:
+        return None
+    stacked = read_image(cube.resolvedPath)
+    if stacked.ndim != 3 or stacked.shape[0] != 6 * stacked.shape[1] or stacked.shape[2] != 3:
+        raise SceneError(cube.resolvedPath, f"{prim.GetPath()} {schema.CUBE}",
+                         f"a cube map of shape (6 N, N, 3), got {stacked.shape}")
+    return kg_from_stacked(stacked.astype(np.float32))
 
 
 def _pole_rotation(prim: Usd.Prim) -> np.ndarray:

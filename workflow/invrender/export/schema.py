@@ -31,8 +31,11 @@ KA = "invrender:ka"
 ROUGHNESS_SOURCE = "invrender:roughnessSource"
 KW = "invrender:kw"
 
-# DomeLight: the kg cube map's size N (the lat-long texture is resampled back to 6 x N x N).
+# DomeLight: the kg cube map's size N (the lat-long texture is resampled back to 6 x N x N), and
+# the exact cube map (stacked (6 N, N, 3)), valid while the texture file is still CUBE_SOURCE.
 CUBE_SIZE = "invrender:cubeSize"
+CUBE = "invrender:cube"
+CUBE_SOURCE = "invrender:cubeSource"
 
 # Cameras: the COLMAP camera exactly (model, parameters in COLMAP's order, image size, name,
 # world-to-camera R and t), valid while the USD lens and transform are the ones it gives.

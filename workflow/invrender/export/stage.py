@@ -41,7 +41,7 @@ from .cameras import author_camera, author_render_product
 from .check import validate_usd
 from .geometry import MeshPiece, author_mesh, connected_faces, piece_of, write_indices
 from .instancing import Duplicates, find_duplicates
-from .lights import author_dome, author_mesh_light, cube_to_latlong, mean_radiance
+from .lights import author_dome, author_mesh_light, mean_radiance, write_sky
 from .materials import TEXTURES, author_material, write_textures
 
 __all__ = ["Part", "plan_parts", "export_usd", "write_stage"]
@@ -158,7 +158,7 @@ def write_stage(path: Path, scene: Scene, parts: list[Part], duplicates: Duplica
             write_indices(prim, MeshPiece(duplicates.prototype.positions, duplicates.prototype.uvs,
                                           duplicates.prototype.faces, copy.face_ids, copy.vertex_ids, copy.instance_id))
 
-    _author_sky_and_cameras(stage, scene, files.get("sky"))
+    _author_sky_and_cameras(stage, scene, files)
     return stage
 
 
@@ -186,9 +186,10 @@ def _author_part(stage: Usd.Stage, path: str, part: Part, material: UsdShade.Mat
         author_mesh_light(mesh.GetPrim(), part.radiance)
 
 
-def _author_sky_and_cameras(stage: Usd.Stage, scene: Scene, sky: str | None) -> None:
-    if sky is not None:
-        author_dome(stage, f"{ROOT}/Lights/sky", sky, scene.maps.kg.shape[1])
+def _author_sky_and_cameras(stage: Usd.Stage, scene: Scene, files: dict) -> None:
+    """The dome (when write_sky wrote its textures into `files`) and the cameras."""
+    if "sky" in files:
+        author_dome(stage, f"{ROOT}/Lights/sky", files["sky"], scene.maps.kg.shape[1], files["sky_cube"])
 
     if scene.cameras:
         UsdGeom.Scope.Define(stage, f"{ROOT}/Cameras")
@@ -224,7 +225,7 @@ def _set_material(stage: Usd.Stage, path: str, files: dict[str, str], name: str)
 
 
 def write_objects_stage(path: Path, scene: Scene, files: dict[str, dict[str, str]],
-                        sky: str | None) -> tuple[Usd.Stage, list[Part]]:
+                        sky: dict) -> tuple[Usd.Stage, list[Part]]:
     """Author a v2 scene (docs/export.md, "Scenes with objects"): one material per material set
     (`files[set]` its textures), one Xform per object with its transform, its mesh in its own
     frame below it split into surfaces, windows and lights as a v1 scene's is; objects sharing a
@@ -297,21 +298,16 @@ def export_usd(scene_dir, out_dir, usdc: bool = False, poses=None, instancing: b
 
     def author(tmp: Path):
         files = write_textures(scene.maps, tmp / TEXTURES)
-        sky = _write_sky(scene, tmp)
-        if sky is not None:
-            files["sky"] = sky
+        files.update(_write_sky(scene, tmp))
         stage = write_stage(tmp / "scene.usda", scene, parts, duplicates, names, files)
         return stage, lambda layers: _summary(scene, parts, duplicates, layers)
 
     return _export(scene_dir, out_dir, usdc, author)
 
 
-def _write_sky(scene: Scene, tmp: Path) -> str | None:
-    """The dome's lat-long texture (none for a black sky); its path relative to the layer."""
-    if not np.any(scene.maps.kg > 0):
-        return None
-    write_exr(tmp / TEXTURES / "sky_latlong.exr", cube_to_latlong(scene.maps.kg))
-    return f"./{TEXTURES}/sky_latlong.exr"
+def _write_sky(scene: Scene, tmp: Path) -> dict:
+    """The dome's textures (none for a black sky): {"sky": lat-long, "sky_cube": exact cube}."""
+    return write_sky(scene.maps.kg, tmp, TEXTURES) if np.any(scene.maps.kg > 0) else {}
 
 
 def _export_objects(scene: Scene, scene_dir: Path, out_dir: Path, usdc: bool) -> dict:

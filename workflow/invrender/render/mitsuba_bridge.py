@@ -52,7 +52,7 @@ import warnings
 
 import numpy as np
 
-from invrender.render.sampling import lookup_cube
+from invrender.scene.cubemap import lookup_cube
 from invrender.scene.regions import classify_faces, face_texels  # noqa: F401 (the bridge's API too)
 from invrender.scene.types import Camera, Scene
 
@@ -91,7 +91,7 @@ MIN_ENVMAP_WIDTH = 1024
 KA_MIN = 1e-6  # lowest roughness of the model (render/bsdf.py clamps ka there too)
 
 # ---------------------------------------------------------------------------------------------
-# Environment: kg cube map (render/sampling.py defines its lookup) -> Mitsuba lat-long envmap
+# Environment: kg cube map (scene/cubemap.py defines its lookup) -> Mitsuba lat-long envmap
 # ---------------------------------------------------------------------------------------------
 
 def envmap_directions(width: int, height: int) -> np.ndarray:

@@ -1,23 +1,11 @@
-"""The float64 reference of the cube map conventions and of the light-sampling strategies.
+"""The float64 reference of the light-sampling strategies.
 
 docs/renderer.md ("Textures", "Sampling") is the contract. Strategies 1 and 2 (cosine and
 Beckmann) live in `bsdf.py`; this file has strategy 3 (environment cube map by luminance),
 strategy 4 (emitting triangles by power, "all hits" PDF) and the one-sample mixture.
 
-Cube maps: kg is (6, N, N, C) (or the stacked EXR layout (6 N, N, C)), faces in the order
-+X, -X, +Y, -Y, +Z, -Z, each with the OpenGL orientation (OpenGL 2.1 specification,
-section 3.8.6, table 3.21; section 8.13 "Cube Map Texture Selection" in OpenGL 4.x):
-
-    face  major  sc    tc          s = (sc / |ma| + 1) / 2,  column = floor(s N)
-    +X    +rx    -rz   -ry         t = (tc / |ma| + 1) / 2,  row    = floor(t N)
-    -X    -rx    +rz   -ry
-    +Y    +ry    +rx   +rz         Row 0 is the first (top) row of the face in the stored
-    -Y    -ry    +rx   -rz         array, as OpenGL's first row of texel data.
-    +Z    +rz    +rx   -ry
-    -Z    -rz    -rx   -ry
-
-The major axis is the component with the largest magnitude; ties (a set of measure zero)
-go to x before y before z, and a zero component's sign counts as +.
+The cube map convention (face order, texel <-> direction, texel solid angles) is
+scene/cubemap.py's; this file samples by it.
 """
 
 from __future__ import annotations
@@ -26,98 +14,13 @@ import numpy as np
 
 from invrender.render import bsdf
 from invrender.render.bsdf import luminance
+from invrender.scene.cubemap import as_cube, cube_texel, cube_texel_solid_angles, cube_to_direction, direction_to_cube
 
-FACES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 STRATEGIES = ("diffuse", "specular", "environment", "emitter")
 
 
 def _f64(*arrays):
     return [np.asarray(a, dtype=np.float64) for a in arrays]
-
-
-# --------------------------------------------------------------------------------------------
-# cube map conventions
-
-
-def direction_to_cube(d):
-    """d (..., 3), any nonzero length -> (face int (...), s (...), t (...)), s, t in [0, 1]."""
-    (d,) = _f64(d)
-    rx, ry, rz = d[..., 0], d[..., 1], d[..., 2]
-    ax, ay, az = np.abs(rx), np.abs(ry), np.abs(rz)
-    x_major = (ax >= ay) & (ax >= az)
-    y_major = ~x_major & (ay >= az)
-    z_major = ~x_major & ~y_major
-    face = np.where(x_major, np.where(rx >= 0, 0, 1),
-                    np.where(y_major, np.where(ry >= 0, 2, 3), np.where(rz >= 0, 4, 5)))
-    # table 3.21: (sc, tc, ma) per face
-    sc = np.select([face == 0, face == 1, face == 2, face == 3, face == 4, face == 5],
-                   [-rz, rz, rx, rx, rx, -rx])
-    tc = np.select([face == 0, face == 1, face == 2, face == 3, face == 4, face == 5],
-                   [-ry, -ry, rz, -rz, -ry, -ry])
-    ma = np.where(x_major, ax, np.where(y_major, ay, az))
-    ma = np.where(ma > 0, ma, 1.0)  # d = 0: face +X, centre (no direction to honour)
-    s = 0.5 * (sc / ma + 1.0)
-    t = 0.5 * (tc / ma + 1.0)
-    return face.astype(np.int64), s, t
-
-
-def cube_to_direction(face, s, t):
-    """Inverse of `direction_to_cube`: (face, s, t) -> unit direction (..., 3)."""
-    face = np.asarray(face)
-    s, t = _f64(s, t)
-    face, s, t = np.broadcast_arrays(face, s, t)
-    sc, tc = 2.0 * s - 1.0, 2.0 * t - 1.0
-    one = np.ones_like(sc)
-    # invert table 3.21 with |ma| = 1
-    conds = [face == k for k in range(6)]
-    rx = np.select(conds, [one, -one, sc, sc, sc, -sc])
-    ry = np.select(conds, [-tc, -tc, one, -one, -tc, -tc])
-    rz = np.select(conds, [-sc, sc, tc, -tc, one, -one])
-    return bsdf.normalize(np.stack([rx, ry, rz], axis=-1))
-
-
-def cube_texel(s, t, n: int):
-    """(row, column) of face coordinates: row = floor(t N), column = floor(s N), clamped."""
-    s, t = _f64(s, t)
-    col = np.clip(np.floor(s * n), 0, n - 1).astype(np.int64)
-    row = np.clip(np.floor(t * n), 0, n - 1).astype(np.int64)
-    return row, col
-
-
-def _area_element(x, y):
-    """Solid angle of the face rectangle [0, x] x [0, y] at unit distance (signed):
-    atan2(x y, sqrt(x^2 + y^2 + 1)). The integral of (1 + u^2 + v^2)^(-3/2) du dv, as in
-    Driscoll, "Cubemap Texel Solid Angle" (2012) and AMD CubeMapGen's AreaElement."""
-    return np.arctan2(x * y, np.sqrt(x * x + y * y + 1.0))
-
-
-def cube_texel_solid_angles(n: int):
-    """Exact solid angle of each texel of one face, (N, N) indexed [row, column]; the same for
-    all six faces (sum over the cube = 4 pi)."""
-    e = np.linspace(-1.0, 1.0, n + 1)  # texel edges in u = 2 s - 1 (columns), v = 2 t - 1 (rows)
-    v0, v1 = e[:-1, None], e[1:, None]
-    u0, u1 = e[None, :-1], e[None, 1:]
-    return (_area_element(u1, v1) - _area_element(u0, v1)
-            - _area_element(u1, v0) + _area_element(u0, v0))
-
-
-def as_cube(kg):
-    """kg as (6, N, N, C): accepts that or the stacked EXR layout (6 N, N, C)."""
-    kg = np.asarray(kg)
-    if kg.ndim == 4 and kg.shape[0] == 6 and kg.shape[1] == kg.shape[2]:
-        return kg
-    if kg.ndim == 3 and kg.shape[0] == 6 * kg.shape[1]:
-        n = kg.shape[1]
-        return kg.reshape(6, n, n, kg.shape[2])
-    raise ValueError(f"kg: expected shape (6, N, N, C) or (6 N, N, C), got {kg.shape}")
-
-
-def lookup_cube(kg, d):
-    """Nearest-texel value of the cube map kg in direction d: (..., 3) -> (..., C)."""
-    kg = as_cube(kg)
-    face, s, t = direction_to_cube(d)
-    row, col = cube_texel(s, t, kg.shape[1])
-    return kg[face, row, col]
 
 
 def _pick(cdf, u):

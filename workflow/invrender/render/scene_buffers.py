@@ -13,7 +13,7 @@ import pyopencl as cl
 
 from ..scene.types import Camera, Maps, Mesh
 from .bvh import WideBVH, build_bvh, triangle_vertices
-from .sampling import cube_texel_solid_angles
+from ..scene.cubemap import cube_texel_solid_angles
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 

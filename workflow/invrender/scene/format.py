@@ -42,6 +42,7 @@ import numpy as np
 
 from .atomic import atomic_dir
 from .cameras import _check_camera, read_cameras, write_colmap
+from .cubemap import kg_from_stacked, kg_to_stacked
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
 from .packing import check_transform, pack_scene, validate_objects
@@ -82,21 +83,6 @@ MAP_RANGES = {
 }
 V2_KG = "maps/kg.exr"
 DEFAULT_FILES = {"mesh": "mesh.ply", "maps": {name: f"maps/{name}.exr" for name in MAP_NAMES}, "cameras": "cameras"}
-
-
-# ---------------------------------------------------------------------------- kg layout
-
-
-def kg_to_stacked(kg: np.ndarray) -> np.ndarray:
-    """(6, N, N, 3) cube map -> (6 N, N, 3), faces +X, -X, +Y, -Y, +Z, -Z top to bottom."""
-    kg = np.asarray(kg)
-    return kg.reshape(6 * kg.shape[1], kg.shape[2], kg.shape[3])
-
-
-def kg_from_stacked(stacked: np.ndarray) -> np.ndarray:
-    """(6 N, N, 3) -> (6, N, N, 3)."""
-    n = stacked.shape[1]
-    return np.ascontiguousarray(stacked).reshape(6, n, n, stacked.shape[2])
 
 
 # ---------------------------------------------------------------------------- scene.json

@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from ..scene.atlas import bake, rasterize_atlas, unwrap
+from ..scene.cubemap import texel_directions
 from ..scene.types import Camera, Maps, Mesh, Scene
 from .primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
 
@@ -239,13 +240,9 @@ def _panel_emission(center, half, radiance, falloff, color) -> Shader:
 
 def sky_cube_map(env: dict) -> np.ndarray:
     """kg (6, N, N, 3): a sky gradient above the horizon, flat ground below, a small sun.
-    Texel directions follow ``render.sampling.cube_to_direction`` (docs/renderer.md)."""
-    from ..render.sampling import cube_to_direction
-
+    Texel directions follow ``scene.cubemap`` (docs/renderer.md)."""
     n = int(env["size"])
-    face = np.repeat(np.arange(6), n * n).reshape(6, n, n)
-    rows, cols = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    d = cube_to_direction(face, (cols[None] + 0.5) / n, (rows[None] + 0.5) / n)  # (6, N, N, 3)
+    d = texel_directions(n)  # (6, N, N, 3)
     up = d[..., 1:2]
     t = np.sqrt(np.clip(up, 0, 1))
     sky = (1 - t) * np.asarray(env["sky_horizon"]) + t * np.asarray(env["sky_zenith"])
