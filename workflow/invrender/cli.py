@@ -85,6 +85,13 @@ def cmd_export(args):
     stage.run(args.scene, args.out, usdc=args.usdc, poses=args.poses, instancing=not args.no_instancing)
 
 
+def cmd_import(args):
+    from .import_ import stage
+
+    stage.run(args.source, args.out, cameras=args.cameras, environment=args.environment, cube_size=args.cube_size,
+              emission_sides=args.emission_sides, windows=tuple(args.window or ()), max_atlas=args.max_atlas)
+
+
 def cmd_import_usd(args):
     from .export import import_usd
 
@@ -175,6 +182,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", help="poses.json of duplicates (default: the poses in scene.json's metadata)")
     p.add_argument("--no-instancing", action="store_true", help="export duplicates as plain meshes")
     p.set_defaults(func=cmd_export)
+
+    p = stages.add_parser("import", help="textured OBJ files + a lat-long environment + cameras -> a scene directory")
+    p.add_argument("source", help="a folder of .obj files (with their mtllib and images), or one .obj")
+    p.add_argument("--out", required=True, help="scene directory to write")
+    p.add_argument("--cameras", help="COLMAP model or transforms.json (default: SOURCE/sparse or SOURCE/transforms.json)")
+    p.add_argument("--environment", help="lat-long environment map (EXR or PNG, +Y up); default: black")
+    p.add_argument("--cube-size", type=int, default=64, help="kg cube-map face size in texels")
+    p.add_argument("--emission-sides", choices=["one", "two"], default="one",
+                   help="emitters light their front only (as Mitsuba, Cycles, USD) or both sides")
+    p.add_argument("--window", action="append", metavar="MATERIAL",
+                   help="a material that is an opening onto the environment (kw = 1); repeatable")
+    p.add_argument("--max-atlas", type=int, default=2048, help="largest atlas side of one material set")
+    p.set_defaults(func=cmd_import)
 
     p = stages.add_parser("import-usd", help="a USD stage written by `export` (perhaps edited) -> a scene directory")
     p.add_argument("usd", help="scene.usda or scene.usdc")

@@ -280,10 +280,29 @@ def obj_statements(path):
 
 
 def read_obj(path, require_uvs: bool = True) -> Mesh:
+    return _obj_mesh(_parse_obj(path), path, require_uvs)
+
+
+def read_obj_parts(path, require_uvs: bool = False) -> tuple[list[tuple[str, Mesh]], list[str]]:
+    """An OBJ split by ``usemtl``: [(material name, Mesh of its faces)] in order of first use
+    (faces before any ``usemtl`` get the name ""), and the ``mtllib`` files it names. Each part
+    keeps only the vertices its faces use."""
+    parsed = _parse_obj(path)
+    parts = []
+    for index, name in enumerate(parsed["materials"]):
+        keep = parsed["polygon_material"] == index
+        if keep.any():
+            parts.append((name, _obj_mesh(parsed, path, require_uvs, keep)))
+    return parts, parsed["mtllibs"]
+
+
+def _parse_obj(path) -> dict:
+    """The raw statements of an OBJ: positions, texcoords, face corners, polygon sizes, the
+    ``usemtl`` in force for each polygon and the ``mtllib`` names."""
     path = Path(path)
     positions, texcoords = [], []
-    corners_v, corners_vt, polygon_sizes = [], [], []
-    any_without_vt = False
+    corners_v, corners_vt, polygon_sizes, polygon_material = [], [], [], []
+    materials, mtllibs, current = [""], [], 0
     for line_no, parts in obj_statements(path):
         tag = parts[0]
         try:
@@ -297,49 +316,59 @@ def read_obj(path, require_uvs: bool = True) -> Mesh:
                 texcoords.append([float(parts[1]), float(parts[2])])
         except ValueError:
             raise SceneError(path, f"line {line_no} {tag}", "numbers: v x y z / vt u v") from None
-        if tag == "f":
+        if tag == "usemtl":
+            name = " ".join(parts[1:])
+            if name not in materials:
+                materials.append(name)
+            current = materials.index(name)
+        elif tag == "mtllib":
+            mtllibs += parts[1:]
+        elif tag == "f":
             if len(parts) < 4:
                 raise SceneError(path, f"line {line_no} f", f"at least 3 vertices, got {len(parts) - 1}")
             for token in parts[1:]:
                 fields = token.split("/")
                 corners_v.append(_obj_index(fields[0], len(positions), path, line_no, "v"))
-                if len(fields) > 1 and fields[1]:
-                    corners_vt.append(_obj_index(fields[1], len(texcoords), path, line_no, "vt"))
-                else:
-                    corners_vt.append(-1)
-                    any_without_vt = True
+                has_vt = len(fields) > 1 and fields[1]
+                corners_vt.append(_obj_index(fields[1], len(texcoords), path, line_no, "vt") if has_vt else -1)
             polygon_sizes.append(len(parts) - 1)
-
-    positions = np.asarray(positions, np.float64).reshape(-1, 3)
+            polygon_material.append(current)
     if not polygon_sizes:
         raise SceneError(path, "f", "at least one face, got none")
-    corners_v = np.asarray(corners_v, np.int64)
-    corners_vt = np.asarray(corners_vt, np.int64)
-    # Fan triangulation on corner indices.
-    starts = np.concatenate([[0], np.cumsum(polygon_sizes)[:-1]])
-    tri = [
-        (s, s + j, s + j + 1) for s, n in zip(starts.tolist(), polygon_sizes) for j in range(1, n - 1)
-    ]
-    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    return {
+        "positions": np.asarray(positions, np.float64).reshape(-1, 3),
+        "texcoords": np.asarray(texcoords, np.float64).reshape(-1, 2),
+        "corners_v": np.asarray(corners_v, np.int64), "corners_vt": np.asarray(corners_vt, np.int64),
+        "polygon_sizes": np.asarray(polygon_sizes, np.int64),
+        "polygon_material": np.asarray(polygon_material, np.int64), "materials": materials, "mtllibs": mtllibs,
+    }
+
+
+def _obj_mesh(parsed: dict, path, require_uvs: bool, keep: np.ndarray | None = None) -> Mesh:
+    """The triangle mesh of the polygons ``keep`` selects (all by default), fan-triangulated."""
+    path = Path(path)
+    positions, texcoords = parsed["positions"], parsed["texcoords"]
+    corners_v, corners_vt, sizes = parsed["corners_v"], parsed["corners_vt"], parsed["polygon_sizes"]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     _check_obj_indices(path, corners_v, len(positions), starts, "v")
-    has_uvs = len(texcoords) > 0 and not any_without_vt
+    keep = np.ones(len(sizes), bool) if keep is None else keep
+    tri = [(s, s + j, s + j + 1) for s, n in zip(starts[keep].tolist(), sizes[keep].tolist()) for j in range(1, n - 1)]
+    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    used_corners = np.unique(tri)
+    has_uvs = len(texcoords) > 0 and bool(np.all(corners_vt[used_corners] >= 0))
     if not has_uvs:
         if require_uvs:
             raise SceneError(path, MISSING_UVS, "vt lines and f v/vt (every face corner with a vt index)")
-        used = np.unique(corners_v)
-        remap = np.full(len(positions), -1, np.int64)
-        remap[used] = np.arange(len(used))
-        return Mesh(
-            positions=positions[used].astype(np.float32),
-            faces=remap[corners_v][tri].astype(np.int32),
-            uvs=None,
-        )
-    texcoords = np.asarray(texcoords, np.float64).reshape(-1, 2)
-    _check_obj_indices(path, corners_vt, len(texcoords), starts, "vt")
-    pairs, inverse = np.unique(np.stack([corners_v, corners_vt], axis=1), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
+        used, inverse = np.unique(corners_v[tri], return_inverse=True)
+        return Mesh(positions=positions[used].astype(np.float32), faces=inverse.reshape(-1, 3).astype(np.int32),
+                    uvs=None)
+    in_part = np.zeros(len(corners_vt), bool)
+    in_part[used_corners] = True
+    _check_obj_indices(path, np.where(in_part, corners_vt, 0), len(texcoords), starts, "vt")
+    pairs, inverse = np.unique(np.stack([corners_v[tri].ravel(), corners_vt[tri].ravel()], axis=1), axis=0,
+                               return_inverse=True)
     return Mesh(
         positions=positions[pairs[:, 0]].astype(np.float32),
-        faces=inverse[tri].astype(np.int32),
+        faces=inverse.reshape(-1, 3).astype(np.int32),
         uvs=texcoords[pairs[:, 1]].astype(np.float32),
     )
