@@ -130,10 +130,12 @@ def test_blender_cameras_project_like_colmap(blender, room):
     for camera in room.cameras:
         theirs = np.asarray(facts["camera_pixels"][Path(camera.name).stem])
         colmap = project_points(camera, points)
-        in_front = np.isfinite(colmap).all(axis=1) & ((points @ camera.R.T + camera.t)[:, 2] > 0.1)
-        assert in_front.sum() >= 20
-        error = np.abs(theirs[in_front] - colmap[in_front]).max()
-        assert error < 0.01, (camera.name, error)
+        # the points it sees (off-image points far from the axis lose more to Blender's float32)
+        seen = ((points @ camera.R.T + camera.t)[:, 2] > 0.1) & np.all(
+            (colmap >= 0) & (colmap <= [camera.width, camera.height]), axis=1)
+        assert seen.sum() >= 20
+        error = np.abs(theirs[seen] - colmap[seen]).max()
+        assert error < 0.01, (camera.name, error)  # measured: at most 9e-5 px
 
 
 def _mean_ratio(blender_image, our_image):
@@ -152,7 +154,7 @@ def test_cycles_renders_the_room_darker_by_the_specular_mapping_gap(blender, our
     """As imported, Cycles shows the room 30 % darker than ours: Blender maps specularColor to the
     Principled BSDF's Specular Tint (F0 = 0.04 ks) and layers the diffuse under the specular
     (docs/export.md, "Blender"). Measured 0.702-0.704 at 64-256 spp; the bound is that gap +- the
-    noise of both means and fails if the gap moves by more (a doubled dome gives ~0.86)."""
+    noise of both means and fails if the gap moves by more (a doubled dome gives 0.87)."""
     _, _, renders = blender
     ratio = _mean_ratio(renders["full"], ours["full"])
     assert abs(ratio - 0.703) < 0.02, ratio
