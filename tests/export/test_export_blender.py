@@ -48,9 +48,16 @@ def blender(demo_exports, room, tmp_path_factory):
     points = np.concatenate([_points_in_view(c, 20, rng) for c in room.cameras])
     camera = room.cameras[0]
     view = Path(camera.name).stem
-    request = {"usd": str(demo_exports["room"] / "scene.usdc"), "width": camera.width, "height": camera.height,
-               "points": points.tolist(), "spp": SPP, "seed": 0, "bounces": BOUNCES,
-               "renders": {"full": {"camera": view}, "diffuse": {"camera": view, "specular": False}}}
+    request = {
+        "usd": str(demo_exports["room"] / "scene.usdc"),
+        "width": camera.width,
+        "height": camera.height,
+        "points": points.tolist(),
+        "spp": SPP,
+        "seed": 0,
+        "bounces": BOUNCES,
+        "renders": {"full": {"camera": view}, "diffuse": {"camera": view, "specular": False}},
+    }
     facts = run_blender(request, out)
     renders = {name: read_image(out / f"{name}.exr")[..., :3].astype(np.float64) for name in request["renders"]}
     return facts, points, renders
@@ -60,8 +67,10 @@ def blender(demo_exports, room, tmp_path_factory):
 def ours(room):
     camera = room.cameras[0]
     images = {}
-    for name, features in (("full", Features.everything(BOUNCES)),
-                           ("diffuse", Features(specular=False, max_bounces=BOUNCES))):
+    for name, features in (
+        ("full", Features.everything(BOUNCES)),
+        ("diffuse", Features(specular=False, max_bounces=BOUNCES)),
+    ):
         radiance = Renderer(room, features).render(camera, spp=SPP, seed=0, progress=False)["radiance"]
         images[name] = radiance.astype(np.float64)
     return images
@@ -95,8 +104,12 @@ def test_blender_binds_the_textures_as_written(blender, demo_exports):
     material = facts["materials"]["atlas"]
     assert {m for mesh in facts["meshes"].values() for m in mesh["materials"]} == {"atlas"}
     inputs = material["inputs"]
-    for socket, file in (("Base Color", "kd"), ("Specular Tint", "ks"), ("Roughness", "roughness"),
-                         ("Emission Color", "ke")):
+    for socket, file in (
+        ("Base Color", "kd"),
+        ("Specular Tint", "ks"),
+        ("Roughness", "roughness"),
+        ("Emission Color", "ke"),
+    ):
         texture = inputs[socket]["texture"]
         assert texture is not None and texture["file"] == f"{file}.exr", socket
         assert texture["colorspace"] == "Non-Color", socket  # sourceColorSpace raw: values as stored
@@ -132,7 +145,8 @@ def test_blender_cameras_project_like_colmap(blender, room):
         colmap = project_points(camera, points)
         # the points it sees (off-image points far from the axis lose more to Blender's float32)
         seen = ((points @ camera.R.T + camera.t)[:, 2] > 0.1) & np.all(
-            (colmap >= 0) & (colmap <= [camera.width, camera.height]), axis=1)
+            (colmap >= 0) & (colmap <= [camera.width, camera.height]), axis=1
+        )
         assert seen.sum() >= 20
         error = np.abs(theirs[seen] - colmap[seen]).max()
         assert error < 0.01, (camera.name, error)  # measured: at most 9e-5 px

@@ -51,11 +51,14 @@ def run_blender(request: dict, out: Path) -> dict:
     """Run blender_client.py on `request` in Blender's interpreter; its facts (renders in `out`)."""
     python = blender_python()
     if not python.is_file():
-        raise FileNotFoundError(f"no Python with Blender's bpy at {python}: python3.11 -m venv .venv-blender && "
-                                ".venv-blender/bin/pip install -r envs/blender.txt")
+        raise FileNotFoundError(
+            f"no Python with Blender's bpy at {python}: python3.11 -m venv .venv-blender && "
+            ".venv-blender/bin/pip install -r envs/blender.txt"
+        )
     (out / "request.json").write_text(json.dumps(request))
-    run = subprocess.run([str(python), str(CLIENT), str(out / "request.json"), str(out)], capture_output=True,
-                         text=True, cwd=out)
+    run = subprocess.run(
+        [str(python), str(CLIENT), str(out / "request.json"), str(out)], capture_output=True, text=True, cwd=out
+    )
     if run.returncode != 0:
         raise RuntimeError(f"blender_client failed:\n{run.stderr[-3000:]}")
     return json.loads((out / "facts.json").read_text())
@@ -98,10 +101,21 @@ def run(spp: int = 256, views=("view_000", "view_002", "view_003"), out: str | N
     export_usd(root / "room", root / "usd")
     cameras = {Path(c.name).stem: c for c in scene.cameras}
     first = cameras[views[0]]
-    renders = {_file_name(variant, view): {"camera": view, **blender_switches}
-               for variant, (blender_switches, _) in VARIANTS.items() for view in views}
-    request = {"usd": str(root / "usd" / "scene.usda"), "width": first.width, "height": first.height, "points": [],
-               "spp": spp, "seed": 0, "bounces": bounces, "renders": renders}
+    renders = {
+        _file_name(variant, view): {"camera": view, **blender_switches}
+        for variant, (blender_switches, _) in VARIANTS.items()
+        for view in views
+    }
+    request = {
+        "usd": str(root / "usd" / "scene.usda"),
+        "width": first.width,
+        "height": first.height,
+        "points": [],
+        "spp": spp,
+        "seed": 0,
+        "bounces": bounces,
+        "renders": renders,
+    }
     (root / "blender").mkdir(exist_ok=True)
     facts = run_blender(request, root / "blender")
     results = {"blender": facts["blender"], "spp": spp, "bounces": bounces, "ratios": {}}
@@ -122,12 +136,18 @@ def run(spp: int = 256, views=("view_000", "view_002", "view_003"), out: str | N
 
 
 def _table(results: dict) -> str:
-    lines = [f"Blender {results['blender']}, {results['spp']} spp, {results['bounces']} bounces: mean of Cycles / ours",
-             "| variant | view | all | " + " | ".join(REGIONS) + " |", "|---" * (3 + len(REGIONS)) + "|"]
+    lines = [
+        f"Blender {results['blender']}, {results['spp']} spp, {results['bounces']} bounces: mean of Cycles / ours",
+        "| variant | view | all | " + " | ".join(REGIONS) + " |",
+        "|---" * (3 + len(REGIONS)) + "|",
+    ]
     for name, r in results["ratios"].items():
         variant, view = name.split("|")
-        lines.append(f"| {variant} | {view} | {r['all']:.3f} | "
-                     + " | ".join(f"{r[k]:.3f}" if k in r else "" for k in REGIONS) + " |")
+        lines.append(
+            f"| {variant} | {view} | {r['all']:.3f} | "
+            + " | ".join(f"{r[k]:.3f}" if k in r else "" for k in REGIONS)
+            + " |"
+        )
     return "\n".join(lines)
 
 

@@ -39,8 +39,12 @@ def _image_facts(image):
     image.pixels.foreach_get(pixels)
     channels = image.channels
     rgb = [sum(pixels[c::channels]) / (len(pixels) // channels) for c in range(min(channels, 3))]
-    return {"file": Path(bpy.path.abspath(image.filepath)).name, "size": list(image.size),
-            "colorspace": image.colorspace_settings.name, "mean": rgb}
+    return {
+        "file": Path(bpy.path.abspath(image.filepath)).name,
+        "size": list(image.size),
+        "colorspace": image.colorspace_settings.name,
+        "mean": rgb,
+    }
 
 
 def _linked_image(socket):
@@ -58,29 +62,44 @@ def _linked_image(socket):
 def material_facts(material):
     principled = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     inputs = {}
-    for name in ("Base Color", "Specular Tint", "Roughness", "Emission Color", "Emission Strength", "IOR",
-                 "Specular IOR Level", "Metallic"):
+    for name in (
+        "Base Color",
+        "Specular Tint",
+        "Roughness",
+        "Emission Color",
+        "Emission Strength",
+        "IOR",
+        "Specular IOR Level",
+        "Metallic",
+    ):
         socket = principled.inputs[name]
         value = socket.default_value
-        inputs[name] = {"texture": _linked_image(socket),
-                        "value": list(value) if hasattr(value, "__len__") else float(value)}
+        inputs[name] = {
+            "texture": _linked_image(socket),
+            "value": list(value) if hasattr(value, "__len__") else float(value),
+        }
     return {"inputs": inputs, "distribution": principled.distribution}
 
 
 def world_facts(world):
     nodes = world.node_tree.nodes
     background = next(n for n in nodes if n.bl_idname == "ShaderNodeBackground")
-    return {"texture": _linked_image(background.inputs["Color"]),
-            "strength": background.inputs["Strength"].default_value}
+    return {
+        "texture": _linked_image(background.inputs["Color"]),
+        "strength": background.inputs["Strength"].default_value,
+    }
 
 
 def scene_facts(scene, request):
     meshes, lights, cameras, materials = {}, [], {}, {}
     for obj in scene.objects:
         if obj.type == "MESH":
-            meshes[obj.name] = {"vertices": len(obj.data.vertices), "faces": len(obj.data.polygons),
-                                "triangles": sum(len(p.vertices) - 2 for p in obj.data.polygons),
-                                "materials": [s.material.name for s in obj.material_slots if s.material]}
+            meshes[obj.name] = {
+                "vertices": len(obj.data.vertices),
+                "faces": len(obj.data.polygons),
+                "triangles": sum(len(p.vertices) - 2 for p in obj.data.polygons),
+                "materials": [s.material.name for s in obj.material_slots if s.material],
+            }
             for slot in obj.material_slots:
                 if slot.material and slot.material.name not in materials:
                     materials[slot.material.name] = material_facts(slot.material)
@@ -101,8 +120,14 @@ def scene_facts(scene, request):
             ndc = world_to_camera_view(scene, camera, to_blender @ Vector(p))  # (0, 0) bottom left
             uv.append([ndc.x * request["width"], (1.0 - ndc.y) * request["height"]])
         pixels[name] = uv
-    return {"meshes": meshes, "lights": lights, "materials": materials, "world": world_facts(scene.world),
-            "camera_pixels": pixels, "blender": bpy.app.version_string}
+    return {
+        "meshes": meshes,
+        "lights": lights,
+        "materials": materials,
+        "world": world_facts(scene.world),
+        "camera_pixels": pixels,
+        "blender": bpy.app.version_string,
+    }
 
 
 def configure_cycles(scene, request):
@@ -128,8 +153,15 @@ def configure_cycles(scene, request):
     scene.render.threads = 2
 
 
-LIGHT_PATHS = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "sample_clamp_direct",
-               "sample_clamp_indirect", "blur_glossy")
+LIGHT_PATHS = (
+    "max_bounces",
+    "diffuse_bounces",
+    "glossy_bounces",
+    "transmission_bounces",
+    "sample_clamp_direct",
+    "sample_clamp_indirect",
+    "blur_glossy",
+)
 
 
 def set_light_paths(cycles, bounces, defaults=False):
@@ -156,10 +188,15 @@ _IMPORTED = {}  # each Principled BSDF's inputs as the importer set them: (value
 
 
 def _restore(tree, node, name):
-    value, source = _IMPORTED.setdefault((tree.name, node.name, name), (
-        node.inputs[name].default_value if not hasattr(node.inputs[name].default_value, "__len__")
-        else tuple(node.inputs[name].default_value),
-        node.inputs[name].links[0].from_socket if node.inputs[name].is_linked else None))
+    value, source = _IMPORTED.setdefault(
+        (tree.name, node.name, name),
+        (
+            node.inputs[name].default_value
+            if not hasattr(node.inputs[name].default_value, "__len__")
+            else tuple(node.inputs[name].default_value),
+            node.inputs[name].links[0].from_socket if node.inputs[name].is_linked else None,
+        ),
+    )
     for link in list(node.inputs[name].links):
         tree.links.remove(link)
     node.inputs[name].default_value = value
