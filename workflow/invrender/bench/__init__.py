@@ -2,6 +2,9 @@
 
 - ``render``: the forward renderer against Mitsuba 3 (``render.py``; docs/benchmarks.md).
 - ``gradients``: one gradient pass against Mitsuba 3's ``prb`` (``gradients.py``; docs/benchmarks.md).
+- ``blender``: Blender's Cycles against ours on the room's USD export, variant by variant
+  (``python -m invrender.bench.blender``; its Blender side is ``blender_client.py``, run in
+  Blender's own interpreter; docs/export.md, "Blender").
 
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
 subprocess of the BVH measurement) does not find its module already imported.
