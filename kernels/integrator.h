@@ -5,6 +5,17 @@
 #ifndef INVRENDER_INTEGRATOR_H
 #define INVRENDER_INTEGRATOR_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "rng.h"
+#include "intersect.h"
+#include "bvh.h"
+#include "camera.h"
+#include "textures.h"
+#include "bsdf.h"
+#include "lights.h"
+#include "sampling.h"
+
 typedef struct {
     float3 p;   /* on the triangle, from barycentrics (more precise than o + t d) */
     float3 n;   /* unit geometric normal, turned to face the incoming ray: two-sided surfaces */

@@ -5,6 +5,12 @@
 #ifndef INVRENDER_LIGHTS_H
 #define INVRENDER_LIGHTS_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "intersect.h"
+#include "bvh.h"
+#include "textures.h"
+
 #ifdef FEATURE_ENVIRONMENT
 inline float3 environment(const SceneData* s, float3 d) { return s->kg[cube_texel_of(s, d)].xyz; }
 #endif
