@@ -18,7 +18,7 @@ from ..scene.cameras import read_cameras
 from ..scene.images import read_image, write_exr, write_png_preview
 from ..scene.mesh_io import read_mesh
 from ..scene.types import Maps, Scene, SceneError
-from .adjoint import backward
+from .adjoint import backward, backward_seed
 from .batches import ray_batch
 from .features import Features
 from .renderer import Renderer
@@ -76,7 +76,7 @@ def write_gradients(geometry_dir, cameras_path, images_dir, out_dir, batch: int 
     residual = radiance.astype(np.float64) - target
     norm = np.linalg.norm(residual, axis=1, keepdims=True)
     adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
-    grads = backward(renderer, scene.cameras, requests, adjoint, spp, seed ^ (1 << 63), accumulation)
+    grads = backward(renderer, scene.cameras, requests, adjoint, spp, backward_seed(seed), accumulation)
     report = {"loss": float(norm.sum()), "rays": len(requests), "spp": spp, "seed": seed, "iteration": iteration,
               "accumulation": accumulation,
               "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}

@@ -27,7 +27,7 @@ from .atomic import atomic_dir
 from .cameras import _check_camera, read_cameras, write_colmap
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
-from .types import ATLAS_MAPS, MAP_CHANNELS, Maps, Scene, SceneError
+from .types import ATLAS_MAPS, MAP_CHANNELS, MAP_NAMES, Maps, Scene, SceneError
 
 __all__ = [
     "FORMAT",
@@ -47,7 +47,6 @@ FORMAT = "invrender-scene"
 VERSION = 1
 SCENE_JSON = "scene.json"
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schemas" / "scene.schema.json"
-MAP_NAMES = (*ATLAS_MAPS, "kg")
 CHANNELS = {**MAP_CHANNELS, "kg": 3}
 CHANNEL_NAMES = {1: "Y", 3: "R,G,B"}
 # (low, low inclusive, high, high inclusive) per map: MILO Eq. 2-3.

@@ -13,6 +13,9 @@ import numpy as np
 
 ATLAS_MAPS = ("kd", "ks", "ka", "ke", "kw")
 MAP_CHANNELS = {"kd": 3, "ks": 3, "ka": 1, "ke": 3, "kw": 1}
+# All six maps, in the one order every list of them uses: scene files, the torch operation's
+# arguments, the adjoint kernel's per-map scales and its atlas gradient channels (render/adjoint.py).
+MAP_NAMES = (*ATLAS_MAPS, "kg")
 
 
 class SceneError(ValueError):
