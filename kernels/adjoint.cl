@@ -91,15 +91,18 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
         }
         Material m = material_at(s, v.texel);
         global grad_t* g = grad_atlas + GRAD_CHANNELS * v.texel;
+        float3 E = (float3)(0.0f); /* nothing, and no derivative, from the back of a one-sided face */
+        if (v.emits) {
 #ifdef FEATURE_EMISSION
-        add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
+            add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
 #endif
 #ifdef FEATURE_WINDOW
-        float3 sky = environment(s, v.d);
-        add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
-        add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
+            float3 sky = environment(s, v.d);
+            add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
+            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
 #endif
-        float3 E = emitted(s, &m, v.d);
+            E = emitted(s, &m, v.d);
+        }
         if (v.inv_pdf > 0.0f) {
             float3 wo = -v.d, d_kd, d_ks, d_ka;
             float3 through = weight * R * v.inv_pdf;

@@ -9,6 +9,7 @@
  *   FEATURE_ENVIRONMENT       kg seen by rays that leave the scene
  *   FEATURE_WINDOW            kw kg term on surfaces (needs FEATURE_ENVIRONMENT)
  *   FEATURE_ENV_SAMPLING      strategy 3: kg cube map by luminance (needs FEATURE_ENVIRONMENT)
+ *   FEATURE_ONE_SIDED         some faces emit (ke + kw kg) on their front side only
  *   MAX_BOUNCES               scattering events per path (Mitsuba's max_depth - 1)
  */
 #ifndef INVRENDER_COMMON_H

@@ -14,6 +14,7 @@
     BUFFER(float2, tri_uv) NEXT       /* 3 UVs per triangle */                                  \
     BUFFER(int, tri_id) NEXT          /* leaf slot -> original triangle index */                \
     BUFFER(int, tri_instance) NEXT    /* leaf slot -> instance id */                            \
+    BUFFER(uchar, tri_one_sided) NEXT /* leaf slot -> 1: emits on its front side only */        \
     BUFFER(float8, bvh_bounds) NEXT   /* 6 rows per node: min xyz, max xyz over 8 lanes */      \
     BUFFER(int8, bvh_children) NEXT   /* 2 rows per node: child/first slot, count */            \
     BUFFER(float4, material) NEXT     /* 3 float4 per texel (Material in common.h) */           \
@@ -29,6 +30,7 @@
     VALUE(int, num_emitters) NEXT                                                                \
     BUFFER(float8, em_bounds) NEXT    /* the emitter BVH, laid out as bvh_bounds */             \
     BUFFER(int8, em_children) NEXT    /* and as bvh_children */                                 \
+    BUFFER(uchar, em_one_sided) NEXT  /* per emitting triangle, as tri_one_sided */             \
     VALUE(float, w_env) NEXT          /* mixture weight of strategy 3 */                        \
     VALUE(float, w_emit)              /* mixture weight of strategy 4 */
 

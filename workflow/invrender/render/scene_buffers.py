@@ -147,6 +147,16 @@ def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
     return np.where(np.isfinite(power), power, 0.0)
 
 
+def one_sided_faces(mesh: Mesh) -> np.ndarray:
+    """(F,) bool: the faces that emit only on their front side (Mesh.one_sided; none if None)."""
+    if mesh.one_sided is None:
+        return np.zeros(len(mesh.faces), bool)
+    flags = np.asarray(mesh.one_sided)
+    if flags.shape != (len(mesh.faces),) or flags.dtype != bool:
+        raise ValueError(f"Mesh.one_sided: expected ({len(mesh.faces)},) bool, got {flags.dtype} {flags.shape}")
+    return flags
+
+
 def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """P(texel) ~ luminance x solid angle over the 6 N N cube texels, its inclusive CDF, and
     whether the sky is black (then the distribution is uniform and must get weight 0)."""
@@ -185,6 +195,7 @@ class HostScene:
     tri_uv: np.ndarray
     tri_id: np.ndarray
     tri_instance: np.ndarray
+    tri_one_sided: np.ndarray
     bvh_bounds: np.ndarray
     bvh_children: np.ndarray
     material: np.ndarray
@@ -200,6 +211,7 @@ class HostScene:
     num_emitters: int
     em_bounds: np.ndarray
     em_children: np.ndarray
+    em_one_sided: np.ndarray
     bvh: WideBVH
     env_black: bool
 
@@ -211,6 +223,7 @@ class HostScene:
         tri_v = _as_float4(np.stack([v0[order], v1[order], v2[order]], axis=1).reshape(-1, 3))
         tri_uv = mesh.uvs[mesh.faces[order]].reshape(-1, 2).astype(np.float32)
         instances = mesh.instance_ids if mesh.instance_ids is not None else np.zeros(len(mesh.faces), np.int32)
+        one_sided = one_sided_faces(mesh).astype(np.uint8)
 
         power = emitted_power(mesh, maps)
         emitters = np.flatnonzero(power > 0)
@@ -225,13 +238,14 @@ class HostScene:
         h, w = maps.atlas_shape
         return cls(
             tri_v=tri_v, tri_uv=tri_uv, tri_id=order.astype(np.int32),
-            tri_instance=instances[order].astype(np.int32),
+            tri_instance=instances[order].astype(np.int32), tri_one_sided=one_sided[order],
             bvh_bounds=bvh.bounds, bvh_children=bvh.children, material=pack_material(maps),
             atlas_w=w, atlas_h=h, kg=_as_float4(maps.kg.reshape(-1, 3)), cube_n=maps.kg.shape[1],
             env_cdf=env_cdf, env_pmf=env_pmf,
             em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
             em_cdf=em_cdf.astype(np.float32), em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
-            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children, bvh=bvh,
+            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children,
+            em_one_sided=one_sided[em_order], bvh=bvh,
             env_black=env_black,
         )
 
@@ -283,8 +297,8 @@ if _missing:
     raise ImportError(f"kernels/scene_data.h lists {sorted(_missing)}, which HostScene does not pack")
 
 # Arguments that depend on the mesh only: new maps for the same mesh leave them as they are.
-GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
+GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "tri_one_sided", "bvh_bounds", "bvh_children")
 
 # Arguments that say how directions are sampled (strategies 3 and 4), built from kg and ke.
 SAMPLING_ARGS = ("env_cdf", "env_pmf", "env_black", "em_v", "em_cdf", "em_pdf_area", "num_emitters", "em_bounds",
-                 "em_children")
+                 "em_children", "em_one_sided")
