@@ -19,29 +19,24 @@
  *   atomics), so rays that hit the same texel at once rarely touch the same word; reduce_buckets
  *   sums the copies. The order of float additions varies from run to run. */
 #include "common.h"
-#include "rng.h"
-#include "intersect.h"
-#include "bvh.h"
+#include "scene_data.h"
 #include "camera.h"
 #include "textures.h"
 #include "bsdf.h"
 #include "lights.h"
-#include "sampling.h"
 #include "integrator.h"
 
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 
-/* Channels of the atlas gradient per texel: kd rgb, ks rgb, ka, ke rgb, kw. */
-#define GRAD_KD 0
-#define GRAD_KS 3
-#define GRAD_KA 6
-#define GRAD_KE 7
-#define GRAD_KW 10
-#define GRAD_CHANNELS 11
-
-/* The six maps, each with its own fixed-point scale: their derivatives can lie ten orders of
- * magnitude apart (d/dka of a mirror against d/dke), and one scale cannot resolve both. */
-enum { MAP_KD, MAP_KS, MAP_KA, MAP_KE, MAP_KW, MAP_KG, GRAD_MAPS };
+/* The layouts come from the host (LAYOUT_DEFINES in workflow/invrender/render/adjoint.py, made
+ * from the map list of workflow/invrender/scene/types.py): GRAD_KD, GRAD_KS, GRAD_KA, GRAD_KE,
+ * GRAD_KW, the first channel of each atlas map in a texel's GRAD_CHANNELS gradient channels, and
+ * MAP_KD ... MAP_KG < GRAD_MAPS, the maps' indices. Each map has its own fixed-point scale: their
+ * derivatives can lie ten orders of magnitude apart (d/dka of a mirror against d/dke), and one
+ * scale cannot resolve both. */
+#if !defined(GRAD_CHANNELS) || !defined(GRAD_MAPS)
+#error "adjoint.cl: build it with render/adjoint.py's LAYOUT_DEFINES (the gradient layout)"
+#endif
 
 typedef struct {
     float scale[GRAD_MAPS]; /* fixed point: units per 1.0, a power of two */
@@ -96,15 +91,18 @@ inline void backpropagate_path(const SceneData* s, const PathVertex* path, int l
         }
         Material m = material_at(s, v.texel);
         global grad_t* g = grad_atlas + GRAD_CHANNELS * v.texel;
+        float3 E = (float3)(0.0f); /* nothing, and no derivative, from the back of a one-sided face */
+        if (v.emits) {
 #ifdef FEATURE_EMISSION
-        add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
+            add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
 #endif
 #ifdef FEATURE_WINDOW
-        float3 sky = environment(s, v.d);
-        add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
-        add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
+            float3 sky = environment(s, v.d);
+            add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
+            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
 #endif
-        float3 E = emitted(s, &m, v.d);
+            E = emitted(s, &m, v.d);
+        }
         if (v.inv_pdf > 0.0f) {
             float3 wo = -v.d, d_kd, d_ks, d_ka;
             float3 through = weight * R * v.inv_pdf;

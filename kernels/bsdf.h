@@ -7,6 +7,8 @@
 #ifndef INVRENDER_BSDF_H
 #define INVRENDER_BSDF_H
 
+#include "common.h"
+
 /* Beckmann D from tan^2 of the half-vector angle. tan^2 comes from |n x h|^2, which keeps full
  * precision near the peak; (cos^2 - 1) / cos^2 would cancel to noise when ka is 1e-6. */
 inline float beckmann_d(float cos_h, float tan2_h, float ka)

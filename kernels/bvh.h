@@ -8,6 +8,10 @@
 #ifndef INVRENDER_BVH_H
 #define INVRENDER_BVH_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "intersect.h"
+
 #define BVH_STACK_SIZE 96
 
 typedef struct {

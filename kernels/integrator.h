@@ -5,11 +5,23 @@
 #ifndef INVRENDER_INTEGRATOR_H
 #define INVRENDER_INTEGRATOR_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "rng.h"
+#include "intersect.h"
+#include "bvh.h"
+#include "camera.h"
+#include "textures.h"
+#include "bsdf.h"
+#include "lights.h"
+#include "sampling.h"
+
 typedef struct {
     float3 p;   /* on the triangle, from barycentrics (more precise than o + t d) */
     float3 n;   /* unit geometric normal, turned to face the incoming ray: two-sided surfaces */
     float2 uv;
     int texel;
+    int emits;  /* 0 on the back of a one-sided face, which emits nothing (lights.h) */
 } SurfacePoint;
 
 inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
@@ -21,6 +33,7 @@ inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
     sp.p = b0 * v0 + h->b1 * v1 + h->b2 * v2;
     float3 n = normalize(cross(v1 - v0, v2 - v0));
     sp.n = dot(n, d) > 0.0f ? -n : n;
+    sp.emits = emits_towards(s->tri_one_sided, h->slot, n, d);
     global const float2* uv = s->tri_uv + 3 * h->slot;
     sp.uv = b0 * uv[0] + h->b1 * uv[1] + h->b2 * uv[2];
     sp.texel = atlas_texel(s, sp.uv);
@@ -43,6 +56,7 @@ typedef struct {
     float3 beta;     /* path throughput arriving at the vertex */
     float3 d;        /* direction the ray travelled to reach it */
     float3 n, wi;    /* shading normal (facing -d) and the direction sampled from here */
+    int emits;       /* E counts here: not the back of a one-sided face */
     float inv_pdf;   /* 1 / p_mix(wi); 0 when the path ended here */
 } PathVertex;
 
@@ -79,8 +93,10 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         if (vertex) {
             vertex->texel = sp.texel;
             vertex->n = sp.n;
+            vertex->emits = sp.emits;
         }
-        radiance += beta * emitted(s, &m, d);
+        if (sp.emits)
+            radiance += beta * emitted(s, &m, d);
         if (bounce == MAX_BOUNCES)
             break;
         Material q = proposal_at(s, sp.texel, &m);

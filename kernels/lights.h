@@ -5,11 +5,31 @@
 #ifndef INVRENDER_LIGHTS_H
 #define INVRENDER_LIGHTS_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "intersect.h"
+#include "bvh.h"
+#include "textures.h"
+
 #ifdef FEATURE_ENVIRONMENT
 inline float3 environment(const SceneData* s, float3 d) { return s->kg[cube_texel_of(s, d)].xyz; }
 #endif
 
-/* Radiance a surface with material m sends back along a ray travelling in direction d. */
+/* Whether triangle `slot` of a list with flags `one_sided`, with unnormalised counter-clockwise
+ * normal n, emits towards a ray travelling in direction d: always, unless it is one-sided and d
+ * meets its back (Mitsuba's `area` emitter is one-sided so; a panel just below a ceiling must
+ * not light the ceiling behind it). Compiled to 1 without FEATURE_ONE_SIDED. */
+inline int emits_towards(global const uchar* one_sided, int slot, float3 n, float3 d)
+{
+#ifdef FEATURE_ONE_SIDED
+    return !one_sided[slot] || dot(n, d) < 0.0f;
+#else
+    return 1;
+#endif
+}
+
+/* Radiance a surface with material m sends back along a ray travelling in direction d (on a
+ * side of it that emits, see emits_towards). */
 inline float3 emitted(const SceneData* s, const Material* m, float3 d)
 {
     float3 e = (float3)(0.0f);
@@ -64,14 +84,18 @@ inline float pdf_environment(const SceneData* s, float3 d)
 
 #ifdef FEATURE_EMITTER_SAMPLING
 /* Strategy 4: an emitting triangle by P(t) ~ area x mean luminance of ke, then a point uniform on
- * it (b0 = 1 - sqrt(u2), b1 = u3 sqrt(u2)). Returns the unit direction from x. */
+ * it (b0 = 1 - sqrt(u2), b1 = u3 sqrt(u2)). Returns the unit direction from x, or (0, 0, 0), a
+ * spent sample, for a point on a one-sided triangle that x sees from behind: it sends nothing
+ * towards x, and pdf_emitter leaves such crossings out, so the density stays the sampler's. */
 inline float3 sample_emitter(const SceneData* s, float3 x, float u1, float u2, float u3)
 {
     int t = sample_cdf(s->em_cdf, s->num_emitters, u1);
     float su = sqrt(u2);
     float b0 = 1.0f - su, b1 = u3 * su;
-    float3 y = b0 * tri_vertex(s->em_v, t, 0) + b1 * tri_vertex(s->em_v, t, 1) +
-               (1.0f - b0 - b1) * tri_vertex(s->em_v, t, 2);
+    float3 v0 = tri_vertex(s->em_v, t, 0), v1 = tri_vertex(s->em_v, t, 1), v2 = tri_vertex(s->em_v, t, 2);
+    float3 y = b0 * v0 + b1 * v1 + (1.0f - b0 - b1) * v2;
+    if (!emits_towards(s->em_one_sided, t, cross(v1 - v0, v2 - v0), y - x))
+        return (float3)(0.0f);
     return normalize(y - x);
 }
 
@@ -101,7 +125,8 @@ inline float pdf_emitter(const SceneData* s, float3 x, float3 d)
                 float t, b1, b2;
                 if (intersect_triangle(&r, v0, v1, v2, RAY_TMAX, &t, &b1, &b2)) {
                     float3 ng = normalize(cross(v1 - v0, v2 - v0));
-                    pdf += s->em_pdf_area[slot] * t * t / fabs(dot(ng, d));
+                    if (emits_towards(s->em_one_sided, slot, ng, d))
+                        pdf += s->em_pdf_area[slot] * t * t / fabs(dot(ng, d));
                 }
             }
         }

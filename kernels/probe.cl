@@ -1,16 +1,16 @@
 #line 2 "probe.cl"
-/* Entry kernels that expose single device functions to the tests (tests/render/test_kernels.py):
- * each case gets the kernel's float32 answer, compared there with the float64 reference. */
+/* Entry kernels that expose single device functions to the tests (run by tests/render/probe.py
+ * for tests/render/test_kernel_*.py): each case gets the kernel's float32 answer, compared there
+ * with the float64 reference. */
 #include "common.h"
+#include "scene_data.h"
 #include "rng.h"
 #include "intersect.h"
 #include "bvh.h"
 #include "camera.h"
 #include "textures.h"
 #include "bsdf.h"
-#include "lights.h"
 #include "sampling.h"
-#include "integrator.h"
 
 /* Per case: f cos, and the densities of strategies 1 and 2 (x: diffuse pdf, y: specular pdf). */
 kernel void probe_bsdf(global const float4* materials, global const float4* n, global const float4* wo,

@@ -3,14 +3,10 @@
  * A ray request is int4 (camera, pixel x, pixel y, ray id); the ray id keys the random numbers,
  * so a pixel renders the same whether it comes in a full image or in a random batch. */
 #include "common.h"
-#include "rng.h"
+#include "scene_data.h"
 #include "intersect.h"
 #include "bvh.h"
 #include "camera.h"
-#include "textures.h"
-#include "bsdf.h"
-#include "lights.h"
-#include "sampling.h"
 #include "integrator.h"
 
 /* Adds samples [sample_start, sample_start + sample_count) of each request to accum (sum of L,

@@ -5,6 +5,11 @@
 #ifndef INVRENDER_SAMPLING_H
 #define INVRENDER_SAMPLING_H
 
+#include "common.h"
+#include "scene_data.h"
+#include "bsdf.h"
+#include "lights.h"
+
 typedef struct {
     float diffuse, specular, env, emit;
 } MixtureWeights;

@@ -6,6 +6,9 @@
 #ifndef INVRENDER_TEXTURES_H
 #define INVRENDER_TEXTURES_H
 
+#include "common.h"
+#include "scene_data.h"
+
 inline int atlas_texel(const SceneData* s, float2 uv)
 {
     int col = clamp((int)floor(uv.x * (float)s->atlas_w), 0, s->atlas_w - 1);
@@ -28,7 +31,7 @@ inline Material material_at(const SceneData* s, int texel)
 }
 
 /* The material a path samples its next direction from: the same one, except under the
- * FIXED_PROPOSAL test hook (common.h). */
+ * FIXED_PROPOSAL test hook (scene_data.h). */
 inline Material proposal_at(const SceneData* s, int texel, const Material* m)
 {
 #ifdef FIXED_PROPOSAL

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from invrender.bench.gradients import BACKWARD_SEED_FLIP, QUICK, has_accumulation, lambertian_room
+from invrender.bench.gradients import QUICK, has_accumulation, lambertian_room
 from invrender.cli import main
 
 SECTIONS = ("equal_error", "one_time", "curves", "profile", "memory", "accumulation")
@@ -73,12 +73,6 @@ def test_start_scene_keeps_lights_and_openings_black():
     assert not np.any(true.maps.ks) and not np.any(start.maps.ks)
     assert np.all(start.maps.kd[covered] == 0.5) and not np.any(start.maps.kd[~covered])
     assert np.array_equal(covered, np.any(true.maps.kd > 0, -1))
-
-
-def test_backward_seed_is_the_torch_ops_one():
-    from invrender.render.torch_ops import RenderRays
-
-    assert BACKWARD_SEED_FLIP == RenderRays.BACKWARD_SEED_FLIP
 
 
 def test_without_an_ad_variant_invrender_is_measured_alone(tmp_path, monkeypatch):

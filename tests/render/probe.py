@@ -27,7 +27,7 @@ class KernelProbe:
         if scene is not None:
             host = HostScene.pack(scene.mesh, scene.maps)
             self.host = host
-            self.scene_args = host.upload(self.context) + list(host.strategy_weights(w_env, w_emit))
+            self.scene_args = host.upload(self.context, w_env, w_emit)
 
     def _in(self, array):
         return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,

@@ -18,7 +18,7 @@ from invrender.scene.types import Maps, Mesh, Scene
 X = np.array([0.0, 0.0, 0.0])  # the shading point, on the floor
 N = np.array([0.0, 1.0, 0.0])
 WO = np.array([0.6, 0.8, 0.0])
-CASES = 6  # chi-square tests in this file, for the Sidak correction
+CASES = 7  # chi-square tests in this file, for the Sidak correction
 
 
 def sky_with_sun(n=8):
@@ -31,22 +31,25 @@ def sky_with_sun(n=8):
     return kg.astype(np.float32)
 
 
-def sampling_scene(kd, ks, ka):
+def sampling_scene(kd, ks, ka, one_sided=False):
     """A floor (texel 0: the material under test) and emitters above it (texel 1: ke > 0), two of
-    them one above the other so the density must sum over every hit, and one tilted."""
+    them one above the other so the density must sum over every hit, and one tilted. With
+    one_sided, the low lamp emits only downwards (its front, towards X) and a fifth lamp, facing
+    up, only upwards: X sees its back, so every sample on it is spent."""
     floor = quad((0, 0, 0), (0, 0, 1), (1, 0, 0))  # front face +Y
     lamp_low = quad((0.2, 1.0, 0.1), (0.3, 0, 0), (0, 0, 0.3))  # faces -Y
     lamp_high = quad((0.3, 2.0, 0.0), (0.5, 0, 0), (0, 0, 0.4))
     tilted = quad((-1.0, 1.5, -0.5), (0.3, 0.3, 0), (0, 0, 0.3))
-    parts = [floor, lamp_low, lamp_high, tilted]
+    parts = [floor, lamp_low, lamp_high, tilted] + ([quad((0.5, 1.2, -0.6), (0, 0, 0.3), (0.3, 0, 0))] if one_sided else [])
     positions = np.concatenate([p for p, _, _ in parts])
     faces = np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(parts)]).astype(np.int32)
-    uvs = np.concatenate([np.full((4, 2), [0.25, 0.75])] + [np.full((4, 2), [0.75, 0.75])] * 3).astype(np.float32)
+    uvs = np.concatenate([np.full((4, 2), [0.25, 0.75])] + [np.full((4, 2), [0.75, 0.75])] * (len(parts) - 1))
     maps = Maps.uniform(size=(2, 2), kd=0, ks=0, ka=ka, kg=0, cube=8)
     maps.kd[0, 0], maps.ks[0, 0] = kd, ks
     maps.ke[0, 1] = [5.0, 4.0, 3.0]
     maps.kg[:] = sky_with_sun()
-    return Scene(Mesh(positions, faces, uvs), maps)
+    flags = np.repeat([False, True, False, False, True], 2)[: len(faces)] if one_sided else None
+    return Scene(Mesh(positions, faces, uvs.astype(np.float32), one_sided=flags), maps)
 
 
 def reference_distributions(scene):
@@ -54,8 +57,9 @@ def reference_distributions(scene):
     v = mesh.positions[mesh.faces].astype(np.float64)
     power = emitted_power(mesh, scene.maps)
     emitting = power > 0
+    one_sided = mesh.one_sided[emitting] if mesh.one_sided is not None else None
     return ref.EnvironmentDistribution(scene.maps.kg), ref.EmitterDistribution(
-        v[emitting, 0], v[emitting, 1], v[emitting, 2], power[emitting])
+        v[emitting, 0], v[emitting, 1], v[emitting, 2], power[emitting], one_sided)
 
 
 def run_chi2(probe, n_samples=400_000, seed=0, res=(20, 40), sub=16):
@@ -86,17 +90,22 @@ STRATEGIES = {
     "environment": (0.5, 0.0, 0.1, 1.0, 0.0),
     "emitters": (0.5, 0.0, 0.1, 0.0, 1.0),
     "mixture": (0.5, 0.3, 0.05, 0.25, 0.25),
+    "emitters_one_sided": (0.5, 0.0, 0.1, 0.0, 1.0),
 }
 
 
 @pytest.mark.parametrize("name", STRATEGIES)
 def test_chi_square_of_each_strategy_and_the_mixture(name):
     kd, ks, ka, w_env, w_emit = STRATEGIES[name]
-    probe = KernelProbe(Features.everything(), sampling_scene(kd, ks, ka), w_env=w_env, w_emit=w_emit)
-    result = run_chi2(probe, sub=NODES.get(name, 16))
+    scene = sampling_scene(kd, ks, ka, one_sided=name.endswith("one_sided"))
+    probe = KernelProbe(Features.everything(), scene, w_env=w_env, w_emit=w_emit)
+    result = run_chi2(probe, sub=NODES.get(name.removesuffix("_one_sided"), 16))
     assert result, result.message
     # the density integrates to the probability that a sample is not spent
     assert abs(result.integral - result.valid_fraction) < 2e-3, result.message
+    if scene.mesh.one_sided is not None:  # spent: the samples on the lamp X sees from behind
+        behind = emitted_power(scene.mesh, scene.maps)[-2:].sum() / emitted_power(scene.mesh, scene.maps).sum()
+        assert abs(1 - result.valid_fraction - behind) < 3e-3, (result.valid_fraction, behind)
 
 
 def test_chi_square_rejects_a_wrong_density():
@@ -116,10 +125,10 @@ def test_chi_square_rejects_a_wrong_density():
     assert not chi2_test(sample, no_jacobian, n_samples=200_000)
 
 
-@pytest.mark.parametrize("name", ["mixture", "emitters", "environment"])
+@pytest.mark.parametrize("name", ["mixture", "emitters", "environment", "emitters_one_sided"])
 def test_mixture_density_matches_reference(name):
     kd, ks, ka, w_env, w_emit = STRATEGIES[name]
-    scene = sampling_scene(kd, ks, ka)
+    scene = sampling_scene(kd, ks, ka, one_sided=name.endswith("one_sided"))
     probe = KernelProbe(Features.everything(), scene, w_env=w_env, w_emit=w_emit)
     env, emitters = reference_distributions(scene)
     rng = np.random.default_rng(2)

@@ -33,6 +33,30 @@ def test_compiler_errors_point_at_the_header_that_has_them(tmp_path, monkeypatch
         cl.Program(context, source).build()
 
 
+def test_code_after_an_inlined_header_keeps_its_own_file_and_line(tmp_path):
+    (tmp_path / "a.h").write_text('#line 2 "a.h"\n#include "b.h"\ninline int one(void) { return two() - 1; }\n')
+    (tmp_path / "b.h").write_text('#line 2 "b.h"\ninline int two(void) { return 2; }\n')
+    (tmp_path / "entry.cl").write_text('#line 2 "entry.cl"\n#include "a.h"\n#include "b.h"\n\n'
+                                       "kernel void k(global int* x) { x[0] = one() + undefined_name; }\n")
+    context, _ = context_and_queue(None)
+    with pytest.raises(cl.RuntimeError, match=r"entry\.cl:5"):
+        cl.Program(context, prog.assemble_source("entry.cl", tmp_path)).build()
+
+
+def test_every_header_includes_what_it_uses():
+    """Each header builds on its own, with every feature on: an entry kernel includes only the
+    headers it calls, and no list of all of them is kept anywhere."""
+    from invrender.render.adjoint import LAYOUT_DEFINES
+
+    context, _ = context_and_queue(None)
+    flags = list(Features.everything(max_bounces=2).defines() + LAYOUT_DEFINES)
+    headers = sorted(path.name for path in prog.KERNEL_DIR.glob("*.h"))
+    assert len(headers) >= 11
+    for name in headers:
+        source = prog.assemble_source(name) + "\nkernel void nothing(global int* x) { x[0] = 0; }\n"
+        cl.Program(context, source).build(options=flags)
+
+
 def test_binaries_are_cached_by_source_flags_and_device(tmp_path, monkeypatch):
     monkeypatch.setenv("INVRENDER_CACHE", str(tmp_path))
     context, _ = context_and_queue(None)

@@ -7,11 +7,11 @@ import numpy as np
 import torch
 from testscenes import box_room, look_at_camera
 
-from invrender.render.adjoint import backward
+from invrender.render.adjoint import backward, backward_seed
 from invrender.render.batches import ray_batch
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer
-from invrender.render.torch_ops import MAP_ORDER, RenderRays, render_rays
+from invrender.render.torch_ops import MAP_ORDER, render_rays
 
 FEATURES = Features(specular=False, emission=True, emitter_sampling=True, environment=False, window=False,
                     env_sampling=False, max_bounces=3)
@@ -40,7 +40,7 @@ def test_forward_is_the_render_and_backward_is_the_adjoint():
     assert np.array_equal(out.detach().numpy(), mean)
     weights = torch.rand(out.shape, generator=torch.Generator().manual_seed(0))
     (out * weights).sum().backward()
-    want = backward(renderer, scene.cameras, requests, weights.numpy(), 8, 5 ^ RenderRays.BACKWARD_SEED_FLIP)
+    want = backward(renderer, scene.cameras, requests, weights.numpy(), 8, backward_seed(5))
     for name in MAP_ORDER:
         assert np.allclose(maps[name].grad.numpy(), want[name], rtol=1e-6, atol=1e-9), name
     assert maps["kd"].grad.abs().sum() > 0 and maps["ke"].grad.abs().sum() > 0

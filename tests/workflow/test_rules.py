@@ -164,7 +164,7 @@ def test_features_analyses_the_scene(built, test_config):
     assert job_counts(result.stdout) == {"features": 1}
     document = read_json(workdir / "results/room/features.json")
     assert set(document["features"]) == {"specular", "emission", "emitter_sampling", "environment", "window",
-                                         "env_sampling", "max_bounces"}
+                                         "env_sampling", "one_sided", "max_bounces"}
     # The room has ceiling lights, a window and a glossy table.
     assert document["features"]["emission"] and document["features"]["window"] and document["features"]["specular"]
     settings = document["evidence"]["settings"]

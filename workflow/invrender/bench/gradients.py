@@ -79,9 +79,6 @@ log = logging.getLogger("invrender.bench")
 ROOM_VIEW = 2  # as bench render: floor, walls, table, window, ceiling panels
 PROBE_MARK = "GRADPROBE "
 START_KD = 0.5
-# The backward pass's seed, as torch_ops.RenderRays derives it (other samples than the forward:
-# the L2 gradient stays unbiased); a copy, so that the memory probe does not import torch.
-BACKWARD_SEED_FLIP = 1 << 63
 # glibc returns large freed blocks to the system only below its mmap threshold, which it raises
 # as big blocks are freed: fixed, a pass's transient buffers show in RSS in every pass, not just
 # in the first.
@@ -197,7 +194,7 @@ class InvrenderGradient:
         self.last = {}
 
     def gradient(self, spp: int, accumulation: str = "fixed") -> np.ndarray:
-        from ..render.adjoint import backward
+        from ..render.adjoint import backward, backward_seed
 
         self._seed += 1
         cameras = [self.camera]
@@ -209,18 +206,18 @@ class InvrenderGradient:
         options = {"accumulation": accumulation} if accumulation != "fixed" else {}
         with _counting_adjoint_runs() as runs:
             grads = backward(self.renderer, cameras, self.requests, adjoint, int(spp),
-                             self._seed ^ BACKWARD_SEED_FLIP, **options)
+                             backward_seed(self._seed), **options)
         self.last = {"forward_s": forward, "backward_s": time.perf_counter() - wall - forward,
                      "adjoint_runs": len(runs) or None, "last_run_s": runs[-1] if runs else None}
         return np.asarray(grads["kd"], np.float64)
 
     def backward_alone(self, spp: int, image: np.ndarray) -> np.ndarray:
         """The backward half with the adjoint of a converged forward image: its noise alone."""
-        from ..render.adjoint import backward
+        from ..render.adjoint import backward, backward_seed
 
         self._seed += 1
         adjoint = 2.0 * (np.asarray(image, np.float32).reshape(-1, 3) - self.target) / self.target.size
-        grads = backward(self.renderer, [self.camera], self.requests, adjoint, int(spp), self._seed ^ BACKWARD_SEED_FLIP)
+        grads = backward(self.renderer, [self.camera], self.requests, adjoint, int(spp), backward_seed(self._seed))
         return np.asarray(grads["kd"], np.float64)
 
     def warm_up(self, spp: int = 1):

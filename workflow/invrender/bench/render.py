@@ -532,7 +532,7 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
 
     from ..render.bvh import build_bvh, triangle_vertices
     from ..render.features import Features
-    from ..render.scene_buffers import SCENE_ARG_ORDER, HostScene
+    from ..render.scene_buffers import GEOMETRY_ARGS, SCENE_ARGS, HostScene
     from ..scene.types import Scene
 
     base, _ = room_scene(settings)
@@ -552,10 +552,9 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     tracemalloc.stop()
 
     host, pack_wall, _ = _clock(HostScene.pack, mesh, scene.maps, bvh)
-    arrays = {name: getattr(host, name) for name in SCENE_ARG_ORDER if isinstance(getattr(host, name), np.ndarray)}
+    arrays = {arg.name: getattr(host, arg.name) for arg in SCENE_ARGS if arg.buffer}
     total_bytes = sum(a.nbytes for a in arrays.values())
-    geometry = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
-    geometry_bytes = sum(arrays[k].nbytes for k in geometry)
+    geometry_bytes = sum(arrays[k].nbytes for k in GEOMETRY_ARGS)
     result = {
         "section": "bvh", "triangles": int(len(mesh.faces)), "subdivision": n,
         "build_s": _median(walls), "build_runs": len(walls), "nodes": bvh.n_nodes, "sah_cost": bvh.sah_cost(),

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.adjoint import backward
+from ..render.adjoint import backward, backward_seed
 from ..render.batches import ray_batch
 from ..render.features import Features
 from ..render.renderer import Renderer
@@ -62,7 +62,7 @@ def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp
     residual = radiance.astype(np.float64) - target
     norm = np.linalg.norm(residual, axis=1, keepdims=True)
     adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
-    grads = backward(renderer, scene.cameras, requests, adjoint, spp, seed ^ (1 << 63), accumulation)
+    grads = backward(renderer, scene.cameras, requests, adjoint, spp, backward_seed(seed), accumulation)
     report = {"loss": float(norm.sum()), "rays": len(requests), "spp": spp, "seed": seed, "iteration": iteration,
               "accumulation": accumulation,
               "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}

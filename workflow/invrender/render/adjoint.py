@@ -15,15 +15,23 @@ import math
 import numpy as np
 import pyopencl as cl
 
-from ..scene.types import Camera
+from ..scene.types import ATLAS_MAPS, MAP_CHANNELS, MAP_NAMES, Camera
 from .program import build_program
 from .renderer import Renderer
 
 log = logging.getLogger(__name__)
 
-GRAD_CHANNELS = {"kd": slice(0, 3), "ks": slice(3, 6), "ka": slice(6, 7), "ke": slice(7, 10), "kw": slice(10, 11)}
-MAPS = ("kd", "ks", "ka", "ke", "kw", "kg")  # the kernel's MAP_* order: one fixed-point scale each
-ATLAS_CHANNELS = 11
+MAPS = MAP_NAMES  # one fixed-point scale each, in this order
+_OFFSETS = np.cumsum([0] + [MAP_CHANNELS[name] for name in ATLAS_MAPS])
+GRAD_CHANNELS = {name: slice(int(start), int(stop)) for name, start, stop in zip(ATLAS_MAPS, _OFFSETS, _OFFSETS[1:])}
+ATLAS_CHANNELS = int(_OFFSETS[-1])  # per texel of the atlas gradient: the atlas maps' channels in order
+# The kernel's side of both layouts, generated here so that adjoint.cl has no copy to keep in step.
+LAYOUT_DEFINES = (
+    *(f"-D GRAD_{name.upper()}={channels.start}" for name, channels in GRAD_CHANNELS.items()),
+    f"-D GRAD_CHANNELS={ATLAS_CHANNELS}",
+    *(f"-D MAP_{name.upper()}={index}" for index, name in enumerate(MAPS)),
+    f"-D GRAD_MAPS={len(MAPS)}",
+)
 ACCUMULATIONS = ("fixed", "buckets")
 NUM_BUCKETS = 64  # MILO's count of gradient-map copies
 BUCKET_BUDGET_BYTES = 1 << 30  # fewer copies when 64 of a large atlas would not fit
@@ -32,6 +40,14 @@ BUCKET_BUDGET_BYTES = 1 << 30  # fewer copies when 64 of a large atlas would not
 # addition is resolved to 2^-RESOLUTION_BITS of the map's largest or better. The first pass
 # puts a peak of 1.0 mid-window; a map whose peak falls outside the window runs again.
 RESOLUTION_BITS = 24
+
+
+def backward_seed(seed: int) -> int:
+    """The seed of the backward pass for a forward pass with `seed`: its top bit flipped, so the
+    adjoint traces other samples than the forward. With a loss like L2, (L - T) and dL/dtheta
+    from the same samples are correlated, and their product's mean is not the gradient of the
+    expected loss (Azinovic et al. 2019); measured here, kd came out 7% low with shared samples."""
+    return int(seed) ^ (1 << 63)
 
 
 def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, adjoint: np.ndarray, spp: int,
@@ -108,7 +124,7 @@ def _accumulate(renderer, cameras, requests, per_sample_adjoint, spp, seed, size
     """Run adjoint_rays over all samples; returns the (atlas, kg) sums, reduced over buckets,
     and the largest single addition to each map."""
     context, queue = renderer.context, renderer.queue
-    program = build_program(context, "adjoint.cl", renderer.defines + defines)
+    program = build_program(context, "adjoint.cl", renderer.defines + LAYOUT_DEFINES + defines)
     n = len(requests)
     cams, reqs = renderer.request_buffers(cameras, requests)
     per_sample = np.zeros((n, 4), np.float32)

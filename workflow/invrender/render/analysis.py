@@ -70,6 +70,17 @@ def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = 
     return any(renderer.render(preview_camera(c), spp=spp, aovs=False)["radiance"].max() > 0 for c in scene.cameras)
 
 
+def has_one_sided_emitters(mesh, maps) -> bool:
+    """Whether some face that emits (ke, or a window's kw kg) is one-sided, the condition for
+    FEATURE_ONE_SIDED: without one, every face emits on both sides and the check is compiled out."""
+    from .scene_buffers import emitted_power, one_sided_faces
+
+    one_sided = one_sided_faces(mesh)
+    if not one_sided.any():
+        return False
+    return bool(maps.kw.max() > 0 or np.any(one_sided & (emitted_power(mesh, maps) > 0)))
+
+
 def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
                   device: str | None = None):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""
@@ -90,7 +101,7 @@ def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overri
     features = Features(
         specular=specular, emission=emission, emitter_sampling=emitting_triangles > 0,
         environment=environment, window=window and environment, env_sampling=environment,
-        max_bounces=bounces_for(rho, settings),
+        one_sided=has_one_sided_emitters(scene.mesh, maps), max_bounces=bounces_for(rho, settings),
     ).with_overrides(overrides)
     evidence = {
         "max_ks": max_ks, "emitting_triangles": emitting_triangles, "max_ke": float(maps.ke.max()),

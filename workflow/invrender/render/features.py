@@ -22,6 +22,9 @@ class Features:
     environment: bool = True  # kg seen by rays leaving the scene
     window: bool = True  # kw kg on surfaces
     env_sampling: bool = True  # sampling strategy 3 (kg by luminance)
+    # Some emitting faces emit on their front side only (Mesh.one_sided). Off unless asked for,
+    # so a features.json from before it means what it meant: every face two-sided.
+    one_sided: bool = False
     max_bounces: int = 10
 
     def __post_init__(self):
@@ -34,7 +37,7 @@ class Features:
 
     @classmethod
     def everything(cls, max_bounces: int = 10) -> "Features":
-        return cls(max_bounces=max_bounces)
+        return cls(one_sided=True, max_bounces=max_bounces)
 
     def defines(self) -> tuple[str, ...]:
         flags = [f"-D FEATURE_{f.name.upper()}" for f in fields(self) if f.type in (bool, "bool") and getattr(self, f.name)]

@@ -20,7 +20,8 @@
 Differences from our model that Mitsuba cannot express (each one a known, documented gap):
 
 - Mitsuba's area emitters are one-sided: a triangle emits only on the side its counter-clockwise
-  winding faces (n = (p1 - p0) x (p2 - p0)); ours emit on both sides.
+  winding faces (n = (p1 - p0) x (p2 - p0)); ours emit on both sides unless `Mesh.one_sided`
+  says otherwise.
 - The window term kw * kg(d) on a surface that is kept (kw < 1, or kw = 1 on a face that also
   has kd, ks or ke) is dropped; a warning names how many faces this affects. With
   window_as_hole=False every face is kept and kw is ignored.

@@ -12,21 +12,33 @@ from pathlib import Path
 import pyopencl as cl
 
 KERNEL_DIR = Path(__file__).resolve().parents[3] / "kernels"
-_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 
 
 def assemble_source(entry: str, kernel_dir: Path = KERNEL_DIR) -> str:
-    """Inline the local #include "x.h" lines once each, as the compiler would. Every file starts
-    with its own #line directive, so compiler errors still name the right file and line, and the
-    whole text (hence its hash) covers every header the program depends on."""
+    """Inline the local #include "x.h" lines, each file once (the headers have include guards
+    and include what they use), as the compiler would. Every file starts with its own #line
+    directive and the text after an inlined header gets its includer's back, so compiler
+    errors name the right file and line; the whole text (hence its hash, the binary cache's
+    key) covers every header the program depends on."""
     seen: set[str] = set()
 
     def expand(name: str) -> str:
         if name in seen:
             return ""
         seen.add(name)
-        text = (kernel_dir / name).read_text()
-        return _INCLUDE.sub(lambda match: expand(match.group(1)), text)
+        lines = (kernel_dir / name).read_text().splitlines(keepends=True)
+        out = []
+        for number, line in enumerate(lines, start=1):
+            match = _INCLUDE.match(line)
+            if not match:
+                out.append(line)
+            elif match.group(1) in seen:
+                out.append("\n")  # already inlined: a blank line keeps the numbering
+            else:
+                out.append(expand(match.group(1)))
+                out.append(f'#line {number + 1} "{name}"\n')
+        return "".join(out)
 
     return expand(entry)
 

@@ -29,7 +29,7 @@ class Renderer:
 
     w_env and w_emit are the mixture weights of the environment and emitter strategies
     (MILO uses 0.25 each); they apply only when the feature is compiled in. `proposal`, a test
-    hook, gives other maps to sample paths from (FIXED_PROPOSAL in kernels/common.h): the
+    hook, gives other maps to sample paths from (FIXED_PROPOSAL in kernels/scene_data.h): the
     renders are then importance-sampled estimates of `scene` with a proposal that stays put.
     """
 
@@ -47,7 +47,7 @@ class Renderer:
             self.host = self.host.sampling_from(HostScene.pack(scene.mesh, proposal, bvh=self.host.bvh))
         self.proposal = None if proposal is None else self._buffer(pack_material(proposal))
         self.defines = features.defines() + (() if proposal is None else ("-D FIXED_PROPOSAL",))
-        self.scene_args = self._scene_args(self.host.upload(self.context))
+        self.scene_args = self._scene_args()
         program = build_program(self.context, "render.cl", self.defines)
         self.render_kernel = cl.Kernel(program, "render_rays")
         self.aov_kernel = cl.Kernel(program, "primary_aovs")
@@ -59,13 +59,13 @@ class Renderer:
         self.scene.maps = maps
         on_device = {name: self.scene_args[SCENE_ARG_ORDER.index(name)] for name in GEOMETRY_ARGS}
         self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh)
-        self.scene_args = self._scene_args(self.host.upload(self.context, reuse=on_device))
+        self.scene_args = self._scene_args(reuse=on_device)
 
-    def _scene_args(self, buffers: list) -> list:
-        """SCENE_PARAMS in kernels/common.h: the scene's buffers, the strategy weights, and the
-        proposal material under the FIXED_PROPOSAL hook."""
-        weights = list(self.host.strategy_weights(self.w_env, self.w_emit))
-        return buffers + weights + ([] if self.proposal is None else [self.proposal])
+    def _scene_args(self, reuse: dict | None = None) -> list:
+        """SCENE_PARAMS in kernels/scene_data.h: the scene's arguments, then the proposal material
+        under the FIXED_PROPOSAL hook."""
+        args = self.host.upload(self.context, self.w_env, self.w_emit, reuse)
+        return args + ([] if self.proposal is None else [self.proposal])
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:

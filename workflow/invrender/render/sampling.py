@@ -94,10 +94,14 @@ class EmitterDistribution:
     supplied by the caller), then a uniform point on it (docs strategy 4).
 
     v0, v1, v2: (T, 3) vertices; power: (T,). Degenerate (zero-area) triangles get P = 0.
+    one_sided: (T,) bool or None: triangles that emit only on their front (counter-clockwise)
+    side; a point sampled on one that x sees from behind is a spent sample, and `pdf` leaves
+    such crossings out.
     """
 
-    def __init__(self, v0, v1, v2, power):
+    def __init__(self, v0, v1, v2, power, one_sided=None):
         self.v0, self.v1, self.v2 = _f64(v0, v1, v2)
+        self.one_sided = np.zeros(len(self.v0), bool) if one_sided is None else np.asarray(one_sided, bool)
         power = np.maximum(np.asarray(power, dtype=np.float64), 0.0)
         cross = np.cross(self.v1 - self.v0, self.v2 - self.v0)
         twice_area = np.linalg.norm(cross, axis=-1)
@@ -125,8 +129,9 @@ class EmitterDistribution:
         """Unit direction from x to a sampled emitter point; the zero vector if y == x (the
         sample fails: its PDF is 0)."""
         (x,) = _f64(x)
-        _, y = self.sample_point(u1, u2, u3)
-        return bsdf.normalize(y - x)
+        tri, y = self.sample_point(u1, u2, u3)
+        behind = self.one_sided[tri] & ~(np.sum(self.normal[tri] * (y - x), axis=-1) < 0)
+        return np.where(behind[..., None], 0.0, bsdf.normalize(y - x))
 
     def pdf(self, x, d, t_min: float = 0.0, chunk: int = 1 << 15):
         """Solid-angle density of `sample` at direction d from x: the sum over EVERY emitting
@@ -161,6 +166,8 @@ class EmitterDistribution:
             bv = (dx * qx + dy * qy + dz * qz) * inv
             s = (qx * bx + qy * by + qz * bz) * inv  # distance along the unit d
             hit = (det != 0) & (bu >= 0) & (bv >= 0) & (bu + bv <= 1) & (s > t_min)
+            if self.one_sided[t]:
+                hit &= det > 0  # d . n < 0: the front
             nx, ny, nz = self.normal[t]
             cos = np.abs(dx * nx + dy * ny + dz * nz)
             out += np.where(hit, self.prob[t] / self.area[t] * s * s / np.where(hit, cos, 1.0), 0.0)

@@ -1,12 +1,16 @@
-"""A Scene packed into the device buffers the kernels read (SceneData in kernels/common.h).
+"""A Scene packed into the device buffers the kernels read (SceneData in kernels/scene_data.h).
 
 Triangles are stored in BVH leaf order; the emitting triangles get a BVH of their own for the
-all-hits density of sampling strategy 4; the cube map gets its sampling distribution.
+all-hits density of sampling strategy 4; the cube map gets its sampling distribution. The
+kernels' list of scene arguments is read from kernels/scene_data.h, so the order in which the
+host passes them is the header's.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import re
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
@@ -14,6 +18,7 @@ import pyopencl as cl
 from ..scene.types import Camera, Maps, Mesh
 from .bvh import WideBVH, build_bvh, triangle_vertices
 from ..scene.cubemap import cube_texel_solid_angles
+from .program import KERNEL_DIR
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -22,6 +27,53 @@ CAMERA_DTYPE = np.dtype(
     [("R", "<f4", 9), ("C", "<f4", 3), ("f", "<f4", 2), ("c", "<f4", 2), ("k", "<f4", 4),
      ("width", "<i4"), ("height", "<i4"), ("distorted", "<i4"), ("pad", "<i4")]
 )
+
+
+@dataclass(frozen=True)
+class SceneArg:
+    """One entry of SCENE_DATA in kernels/scene_data.h."""
+
+    name: str
+    cl_type: str  # OpenCL type of the scalar, or of a buffer's elements
+    buffer: bool  # a read-only global buffer (BUFFER) or a scalar passed by value (VALUE)
+
+
+# numpy kind, item size and elements per value of each OpenCL type the list may use.
+CL_TYPES = {"float": ("f", 4, 1), "float2": ("f", 4, 2), "float4": ("f", 4, 4), "float8": ("f", 4, 8),
+            "int": ("i", 4, 1), "int8": ("i", 4, 8), "uchar": ("u", 1, 1)}
+_SCENE_DATA_START = "#define SCENE_DATA(BUFFER, VALUE, NEXT)"
+_SCENE_DATA_ENTRY = re.compile(r"^\s+(BUFFER|VALUE)\((\w+), (\w+)\)( NEXT)?\s*(/\*[^*]*\*/)?\s*(\\)?$")
+
+
+def read_scene_data(path: Path = KERNEL_DIR / "scene_data.h") -> tuple[SceneArg, ...]:
+    """The SCENE_DATA list of kernels/scene_data.h, in order. Strict: the macro's first line as
+    written there, then one `BUFFER(type, name) NEXT` or `VALUE(type, name) NEXT` per line, each
+    continued with a backslash, the last without NEXT or backslash. Any other form is an error
+    rather than a guess, since a misread list would pass the kernels the wrong buffers."""
+    lines = Path(path).read_text().splitlines()
+    where = lambda number: f"{path}:{number}"
+    starts = [i for i, line in enumerate(lines) if line.startswith(_SCENE_DATA_START)]
+    if len(starts) != 1 or not lines[starts[0]].rstrip().endswith("\\"):
+        raise ValueError(f"{path}: expected one line starting {_SCENE_DATA_START!r} and ending in a backslash")
+    args, number = [], starts[0] + 1
+    while True:
+        if number >= len(lines):
+            raise ValueError(f"{where(number)}: SCENE_DATA does not end")
+        match = _SCENE_DATA_ENTRY.match(lines[number])
+        number += 1
+        if not match:
+            raise ValueError(f"{where(number)}: expected `    BUFFER(type, name) NEXT /* ... */ \\` or VALUE, "
+                             f"got {lines[number - 1]!r}")
+        kind, cl_type, name, has_next, _, continued = match.groups()
+        if cl_type not in CL_TYPES:
+            raise ValueError(f"{where(number)}: type {cl_type!r}: expected one of {sorted(CL_TYPES)}")
+        if bool(has_next) != bool(continued):
+            raise ValueError(f"{where(number)}: NEXT and a backslash go together (every entry but the last)")
+        if name in {arg.name for arg in args}:
+            raise ValueError(f"{where(number)}: {name} listed twice")
+        args.append(SceneArg(name, cl_type, kind == "BUFFER"))
+        if not continued:
+            return tuple(args)
 
 
 def pack_cameras(cameras: list[Camera]) -> np.ndarray:
@@ -95,6 +147,16 @@ def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
     return np.where(np.isfinite(power), power, 0.0)
 
 
+def one_sided_faces(mesh: Mesh) -> np.ndarray:
+    """(F,) bool: the faces that emit only on their front side (Mesh.one_sided; none if None)."""
+    if mesh.one_sided is None:
+        return np.zeros(len(mesh.faces), bool)
+    flags = np.asarray(mesh.one_sided)
+    if flags.shape != (len(mesh.faces),) or flags.dtype != bool:
+        raise ValueError(f"Mesh.one_sided: expected ({len(mesh.faces)},) bool, got {flags.dtype} {flags.shape}")
+    return flags
+
+
 def environment_distribution(kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """P(texel) ~ luminance x solid angle over the 6 N N cube texels, its inclusive CDF, and
     whether the sky is black (then the distribution is uniform and must get weight 0)."""
@@ -126,12 +188,14 @@ def _as_float4(points: np.ndarray) -> np.ndarray:
 
 @dataclass
 class HostScene:
-    """Everything the kernels read, as numpy arrays in SCENE_PARAMS order (kernels/common.h)."""
+    """Everything the kernels read, as numpy arrays: a field per SCENE_DATA entry of
+    kernels/scene_data.h but the strategy weights (see upload), and what the host keeps."""
 
     tri_v: np.ndarray
     tri_uv: np.ndarray
     tri_id: np.ndarray
     tri_instance: np.ndarray
+    tri_one_sided: np.ndarray
     bvh_bounds: np.ndarray
     bvh_children: np.ndarray
     material: np.ndarray
@@ -147,6 +211,7 @@ class HostScene:
     num_emitters: int
     em_bounds: np.ndarray
     em_children: np.ndarray
+    em_one_sided: np.ndarray
     bvh: WideBVH
     env_black: bool
 
@@ -158,6 +223,7 @@ class HostScene:
         tri_v = _as_float4(np.stack([v0[order], v1[order], v2[order]], axis=1).reshape(-1, 3))
         tri_uv = mesh.uvs[mesh.faces[order]].reshape(-1, 2).astype(np.float32)
         instances = mesh.instance_ids if mesh.instance_ids is not None else np.zeros(len(mesh.faces), np.int32)
+        one_sided = one_sided_faces(mesh).astype(np.uint8)
 
         power = emitted_power(mesh, maps)
         emitters = np.flatnonzero(power > 0)
@@ -172,13 +238,14 @@ class HostScene:
         h, w = maps.atlas_shape
         return cls(
             tri_v=tri_v, tri_uv=tri_uv, tri_id=order.astype(np.int32),
-            tri_instance=instances[order].astype(np.int32),
+            tri_instance=instances[order].astype(np.int32), tri_one_sided=one_sided[order],
             bvh_bounds=bvh.bounds, bvh_children=bvh.children, material=pack_material(maps),
             atlas_w=w, atlas_h=h, kg=_as_float4(maps.kg.reshape(-1, 3)), cube_n=maps.kg.shape[1],
             env_cdf=env_cdf, env_pmf=env_pmf,
             em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
             em_cdf=em_cdf.astype(np.float32), em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
-            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children, bvh=bvh,
+            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children,
+            em_one_sided=one_sided[em_order], bvh=bvh,
             env_black=env_black,
         )
 
@@ -191,32 +258,47 @@ class HostScene:
         """This scene with the environment and emitter sampling tables of `proposal`."""
         return replace(self, **{name: getattr(proposal, name) for name in SAMPLING_ARGS})
 
-    def upload(self, context: cl.Context, reuse: dict | None = None) -> list:
-        """Kernel arguments in SCENE_PARAMS order; int fields as np.int32, arrays as buffers.
-        `reuse` maps argument names to buffers already on the device (the geometry, when only
-        the maps changed)."""
+    def upload(self, context: cl.Context, w_env: float, w_emit: float, reuse: dict | None = None) -> list:
+        """Kernel arguments in SCENE_DATA order (kernels/scene_data.h): buffers as cl.Buffer,
+        scalars as the header's type; w_env and w_emit as strategy_weights gives them. `reuse`
+        maps argument names to buffers already on the device (the geometry, when only the maps
+        changed)."""
+        weights = dict(zip(("w_env", "w_emit"), self.strategy_weights(w_env, w_emit)))
         args = []
-        for name in SCENE_ARG_ORDER:
-            value = getattr(self, name)
-            if reuse and name in reuse:
-                args.append(reuse[name])
-            elif isinstance(value, np.ndarray):
-                data = np.ascontiguousarray(value if value.size else np.zeros(4, value.dtype))
+        for arg in SCENE_ARGS:
+            value = weights[arg.name] if arg.name in weights else getattr(self, arg.name)
+            if reuse and arg.name in reuse:
+                args.append(reuse[arg.name])
+            elif arg.buffer:
+                data = np.ascontiguousarray(_checked_buffer(arg, value))
+                data = data if data.size else np.zeros(4, data.dtype)  # OpenCL has no empty buffers
                 args.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data))
             else:
-                args.append(np.int32(value))
+                args.append(np.dtype(f"{CL_TYPES[arg.cl_type][0]}{CL_TYPES[arg.cl_type][1]}").type(value))
         return args
 
 
+def _checked_buffer(arg: SceneArg, value) -> np.ndarray:
+    """`value` if its elements are the header's type: vector types as the last axis."""
+    kind, size, width = CL_TYPES[arg.cl_type]
+    fits = isinstance(value, np.ndarray) and value.dtype.kind == kind and value.dtype.itemsize == size and (
+        value.shape[-1:] == (width,) if width > 1 else value.ndim == 1)
+    if not fits:
+        got = f"{value.dtype} {value.shape}" if isinstance(value, np.ndarray) else type(value).__name__
+        raise ValueError(f"HostScene.{arg.name}: expected {arg.cl_type} elements (kernels/scene_data.h), got {got}")
+    return value
+
+
+# The kernels' scene arguments, in order: read from the header the kernels are built from.
+SCENE_ARGS = read_scene_data()
+SCENE_ARG_ORDER = tuple(arg.name for arg in SCENE_ARGS)
+_missing = set(SCENE_ARG_ORDER) - {f.name for f in fields(HostScene)} - {"w_env", "w_emit"}
+if _missing:
+    raise ImportError(f"kernels/scene_data.h lists {sorted(_missing)}, which HostScene does not pack")
+
 # Arguments that depend on the mesh only: new maps for the same mesh leave them as they are.
-GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children")
+GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "tri_one_sided", "bvh_bounds", "bvh_children")
 
 # Arguments that say how directions are sampled (strategies 3 and 4), built from kg and ke.
 SAMPLING_ARGS = ("env_cdf", "env_pmf", "env_black", "em_v", "em_cdf", "em_pdf_area", "num_emitters", "em_bounds",
-                 "em_children")
-
-SCENE_ARG_ORDER = (
-    "tri_v", "tri_uv", "tri_id", "tri_instance", "bvh_bounds", "bvh_children", "material",
-    "atlas_w", "atlas_h", "kg", "cube_n", "env_cdf", "env_pmf", "em_v", "em_cdf", "em_pdf_area",
-    "num_emitters", "em_bounds", "em_children",
-)
+                 "em_children", "em_one_sided")

@@ -6,23 +6,18 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..scene.types import Camera, Maps
-from .adjoint import backward
+from ..scene.types import MAP_NAMES, Camera, Maps
+from .adjoint import backward, backward_seed
 from .renderer import Renderer
 
-MAP_ORDER = ("kd", "ks", "ka", "ke", "kw", "kg")
+MAP_ORDER = MAP_NAMES  # the operation's map arguments and gradients, in the scenes' order
 
 
 class RenderRays(torch.autograd.Function):
     """RenderRays.apply(kd, ks, ka, ke, kw, kg, renderer, cameras, requests, spp, seed) -> (n, 3).
 
-    The backward traces other samples than the forward (its seed with the top bit flipped):
-    with a loss like L2, (L - T) and dL/dtheta from the same samples are correlated, and their
-    product's mean is not the gradient of the expected loss (Azinovic et al. 2019); measured
-    here, kd came out 7% low with shared samples. Sampling is detached (docs/renderer.md,
-    "Gradients")."""
-
-    BACKWARD_SEED_FLIP = 1 << 63
+    The backward traces other samples than the forward (adjoint.backward_seed). Sampling is
+    detached (docs/renderer.md, "Gradients")."""
 
     @staticmethod
     def forward(ctx, kd, ks, ka, ke, kw, kg, renderer: Renderer, cameras: list[Camera], requests: np.ndarray,
@@ -37,7 +32,7 @@ class RenderRays(torch.autograd.Function):
     def backward(ctx, grad_output):
         renderer, cameras, requests, spp, seed = ctx.state
         grads = backward(renderer, cameras, requests, grad_output.detach().cpu().numpy(), spp,
-                         seed ^ RenderRays.BACKWARD_SEED_FLIP)
+                         backward_seed(seed))
         return tuple(torch.from_numpy(grads[name].astype(np.float32)) for name in MAP_ORDER) + (None,) * 5
 
 

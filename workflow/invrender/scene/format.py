@@ -46,7 +46,7 @@ from .cubemap import kg_from_stacked, kg_to_stacked
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
 from .packing import check_transform, pack_scene, validate_objects
-from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Scene, SceneError, SceneObject
+from .types import ATLAS_MAPS, MAP_CHANNELS, MAP_NAMES, Atlas, Maps, Scene, SceneError, SceneObject
 
 __all__ = [
     "FORMAT",
@@ -69,7 +69,6 @@ FORMAT = "invrender-scene"
 VERSION = 1
 SCENE_JSON = "scene.json"
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schemas" / "scene.schema.json"
-MAP_NAMES = (*ATLAS_MAPS, "kg")
 CHANNELS = {**MAP_CHANNELS, "kg": 3}
 CHANNEL_NAMES = {1: "Y", 3: "R,G,B"}
 # (low, low inclusive, high, high inclusive) per map: MILO Eq. 2-3.

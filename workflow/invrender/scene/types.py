@@ -13,6 +13,9 @@ import numpy as np
 
 ATLAS_MAPS = ("kd", "ks", "ka", "ke", "kw")
 MAP_CHANNELS = {"kd": 3, "ks": 3, "ka": 1, "ke": 3, "kw": 1}
+# All six maps, in the one order every list of them uses: scene files, the torch operation's
+# arguments, the adjoint kernel's per-map scales and its atlas gradient channels (render/adjoint.py).
+MAP_NAMES = (*ATLAS_MAPS, "kg")
 
 
 class SceneError(ValueError):
@@ -29,7 +32,7 @@ class Mesh:
     faces: np.ndarray  # (F, 3) int32, counter-clockwise seen from the front
     uvs: np.ndarray  # (V, 2) float32 atlas coordinates in [0, 1], v up
     instance_ids: np.ndarray | None = None  # (F,) int32, 0 = no instance
-    one_sided: np.ndarray | None = None  # (F,) bool: emits from its front only; None = all two-sided
+    one_sided: np.ndarray | None = None  # (F,) bool: emits only on its front (counter-clockwise) side; None = all two-sided
 
     @property
     def triangle_count(self) -> int:
