@@ -11,7 +11,8 @@ from testscenes import box_room, look_at_camera
 
 from invrender.render import mitsuba_bridge as mb
 from invrender.render.adjoint import backward
-from invrender.render.features import Features, analyse_scene
+from invrender.render.analysis import analyse_scene
+from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
 
 BOUNCES = 3
