@@ -8,7 +8,7 @@ it (no forward/backward correlation to worry about).
 
 Mitsuba's side, chosen by what is installed:
 - `prb` (path replay backpropagation, `llvm_ad_rgb`): its gradient of the same loss w.r.t. the
-  kd bitmap of a two-sided `diffuse` BSDF (render/mitsuba_bridge.py, `scene_to_mitsuba_diffuse`),
+  kd bitmap of a two-sided `diffuse` BSDF (invrender/mitsuba/, `scene_to_mitsuba_diffuse`),
   compared in 4 x 4 texel blocks per channel;
 - central differences of `scalar_rgb` renders with common random numbers (one seed for both
   sides of a difference; with no Russian roulette and kd-independent sampling the paths are the
@@ -28,11 +28,13 @@ import pytest
 from testscenes import look_at_camera, quad
 
 # The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
-import invrender.render.mitsuba_bridge as mb  # isort: skip
-from invrender.render.adjoint import backward  # noqa: E402
-from invrender.render.features import Features  # noqa: E402
-from invrender.render.renderer import Renderer, pixel_requests  # noqa: E402
-from invrender.scene.types import Maps, Mesh, Scene  # noqa: E402
+import invrender.mitsuba as mb  # noqa: I001
+import drjit as dr
+import mitsuba as mi
+from invrender.render.adjoint import backward
+from invrender.render.features import Features
+from invrender.render.renderer import Renderer, pixel_requests
+from invrender.scene.types import Maps, Mesh, Scene
 
 BOUNCES = 3
 TILE, GRID = 8, 4  # atlas GRID x GRID tiles of TILE x TILE texels: 32 x 32
@@ -104,7 +106,6 @@ def ours(room):
 def mitsuba_prb(scene, camera, weights) -> np.ndarray:
     """Mitsuba's d Loss / d kd, one (N, N, 3) map per seed: mi.render with the kd bitmap
     tracking gradients, dr.backward of the loss."""
-    mi, dr = mb.mi, mb.dr
     loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(scene, camera, BOUNCES, SPP, "llvm_ad_rgb",
                                                       integrator=mb.prb_integrator(BOUNCES)), parallel=False)
     params = mi.traverse(loaded)
@@ -125,10 +126,9 @@ def mitsuba_central_differences(scene, camera, weights, tiles) -> np.ndarray:
     """(seeds, surfaces, 3): d Loss / d(kd of every texel of a surface's tile, per channel) by
     central differences of scalar_rgb renders with common random numbers. Channels do not mix in
     RGB, so one pair of renders per surface gives all three."""
-    mi = mb.mi
     loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(
         scene, camera, BOUNCES, FD_SPP, "scalar_rgb",
-        integrator={"type": "path", "max_depth": BOUNCES + 1, "rr_depth": BOUNCES + 2}), parallel=False)
+        integrator=mb.path_integrator(BOUNCES)), parallel=False)
     params = mi.traverse(loaded)
     key = mb.kd_parameter(params)
     kd = np.array(params[key], np.float32)
