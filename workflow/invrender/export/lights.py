@@ -14,7 +14,7 @@ The DomeLight's lat-long texture follows the UsdLux specification (the OpenEXR o
 (column j, row i) of a W x H (= 2H x H) image holds the radiance arriving from direction
 d = (sin(lon) cos(lat), sin(lat), cos(lon) cos(lat)) with lon = pi - 2 pi j / (W - 1) and
 lat = pi / 2 - pi i / (H - 1): +Y up, the image centre looking along +Z, a quarter from the left
-along +X, the left and right edges along -Z. Mitsuba's `envmap` (render/mitsuba_bridge.py) has
+along +X, the left and right edges along -Z. Mitsuba's `envmap` (invrender/mitsuba/envmap.py) has
 the same orientation and rows but places column j at (j + 1/2) / W, so its image is resampled
 here rather than reused. Renderers that filter the texture place pixel centres at (j + 1/2) / W
 too; with 8 lat-long columns per cube texel at the horizon that half pixel is 1/16 of a texel.
