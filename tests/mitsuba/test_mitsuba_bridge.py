@@ -324,10 +324,10 @@ def _reference_bsdf_cos(wo, wi, kd, ks, ka):
     return np.where(((ci > 0) & (co > 0))[:, None], val * ci[:, None], 0.0)
 
 
-def _bsdf_and_si(variant, kd, ks, ka, wo):
+def _bsdf_and_si(variant, kd, ks, ka, wo, plugin="milo"):
     """The plugin and, in a JIT variant, one SurfaceInteraction per viewer direction wo."""
     mb.set_variant(variant)
-    bsdf = mi.load_dict(mb.milo_bsdf(kd, ks, ka))
+    bsdf = mi.load_dict(mb.milo_bsdf(kd, ks, ka) | {"type": plugin})
     if variant == SCALAR:
         return bsdf, None
     si = dr.zeros(mi.SurfaceInteraction3f, len(wo))
@@ -415,9 +415,9 @@ def test_milo_sampling_chi2(wo):
     assert chi2.run(), chi2.messages
 
 
-def _eval_pdf_rows(variant, kd, ks, ka, wo, wi):
+def _eval_pdf_rows(variant, kd, ks, ka, wo, wi, plugin="milo"):
     """The plugin's (f ci (N, 3), pdf (N,)) for viewer directions wo and light directions wi."""
-    bsdf, si = _bsdf_and_si(variant, kd, ks, ka, wo)
+    bsdf, si = _bsdf_and_si(variant, kd, ks, ka, wo, plugin)
     ctx = mi.BSDFContext()
     if variant == LLVM:
         value, pdf = bsdf.eval_pdf(ctx, si, mi.Vector3f(*(np.asarray(wi, np.float32).T)))
@@ -489,6 +489,31 @@ def test_milo_at_degenerate_directions_matches_the_kernel(variant):
     for k, name in enumerate(DEGENERATE):
         assert np.allclose(got[k], f[k], rtol=1e-4, atol=1e-6), (name, got[k], f[k])
         assert np.isclose(got_pdf[k], pdf[k], rtol=1e-4, atol=1e-6), (name, got_pdf[k], pdf[k])
+
+
+@pytest.mark.parametrize("variant", BOTH)
+def test_usd_preview_lobe_is_ggx_smith_sampled_as_milo(variant):
+    # bench export's `usd_preview_lobe`: UsdPreviewSurface's GGX D and separable Smith G at
+    # alpha^2 = ka, written out here from Walter et al. 2007 (Eqs. 33, 34); milo's pdf.
+    rng = np.random.default_rng(8)
+    count = 2000 if variant == LLVM else 80
+    kd, ks, ka = np.array([0.3, 0.5, 0.7]), np.array([0.04, 0.5, 0.9]), 0.08
+    wo = _random_directions(rng, count)
+    mirror = wo * np.array([-1.0, -1.0, 1.0]) + 0.2 * rng.normal(size=(count, 3))
+    wi = mirror / np.linalg.norm(mirror, axis=1, keepdims=True)
+    n = np.array([0.0, 0.0, 1.0]) * np.where(wo[:, 2] < 0, -1.0, 1.0)[:, None]
+    ci, co = np.sum(n * wi, 1), np.sum(n * wo, 1)
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=1, keepdims=True)
+    c2, wih = np.sum(n * h, 1) ** 2, np.sum(wi * h, 1)
+    d = ka / (np.pi * (c2 * (ka - 1) + 1) ** 2)
+    g1 = lambda c: 2 / (1 + np.sqrt(1 + ka * (1 - c**2) / np.maximum(c, 1e-12) ** 2))
+    f = ks + (np.minimum(1, 50 * ks) - ks) * np.clip(1 - wih, 0, 1)[:, None] ** 5
+    value = kd * ci[:, None] / np.pi + f * (d * g1(ci) * g1(co) / (4 * np.maximum(co, 1e-12)))[:, None]
+    expected = np.where(((ci > 0) & (co > 0))[:, None], value, 0.0)
+    assert (expected > 0).any(1).mean() > 0.3
+    got, pdf = _eval_pdf_rows(variant, kd, ks, ka, wo, wi, plugin="usd_preview_lobe")
+    assert np.allclose(got, expected, rtol=2e-4, atol=1e-5)
+    assert np.allclose(pdf, _eval_pdf_rows(variant, kd, ks, ka, wo, wi)[1], rtol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------
