@@ -46,10 +46,12 @@ class Settings:
     spp: int = 256  # our renders
     mitsuba_spp: int = 256
     mitsuba_views: int | None = None  # the room's first N views in Mitsuba (None: all 6)
+    room_config: tuple = ()  # overrides of the demo room's config, as (key, value) pairs
 
 
 FULL = Settings("full")
-QUICK = Settings("quick", spp=2, mitsuba_spp=1, mitsuba_views=1)
+QUICK = Settings("quick", spp=2, mitsuba_spp=1, mitsuba_views=1,
+                 room_config=(("cameras", {"count": 2, "width": 32, "height": 24}),))
 
 
 def scalar_settings(settings: Settings) -> Settings:
@@ -84,11 +86,11 @@ def _with_maps(scene: Scene, **maps) -> Scene:
     return Scene(scene.mesh, Maps(**values), scene.cameras)
 
 
-def round_trips(root: Path, spp: int) -> list[dict]:
+def round_trips(root: Path, spp: int, room_config: dict) -> list[dict]:
     rows = []
-    for name, make, options in (("room", make_room, {}), ("cans", make_duplicates, {}),
-                                ("cans, --no-instancing", make_duplicates, {"instancing": False})):
-        scene, metadata = make({})
+    for name, make, config, options in (("room", make_room, room_config, {}), ("cans", make_duplicates, {}, {}),
+                                        ("cans, --no-instancing", make_duplicates, {}, {"instancing": False})):
+        scene, metadata = make(dict(config))
         key = name.split(",")[0]
         write_scene(root / key, scene, metadata)
         write_scene(root / f"{key}_baseline", load_scene(root / key))
@@ -188,7 +190,7 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     log.info("bench export (%s): Mitsuba %s, out %s", settings.mode, variant, out)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        results = {"round_trip": round_trips(root, settings.spp)}
+        results = {"round_trip": round_trips(root, settings.spp, dict(settings.room_config))}
         results["standard_view"] = standard_view(root, settings.spp)
         results["ggx"] = ggx_in_mitsuba(root, settings.mitsuba_spp, variant, settings.mitsuba_views)
     machine = machine_info(device)
