@@ -30,6 +30,9 @@ is installed). docs/benchmarks.md ("Renderer") has the method, a full run and it
    window or sky and on the default room: time per sample, ratio, image agreement.
 4. **Profile**: where invrender's time and variance go (sampling strategies compiled out,
    mixture weights, one-bounce ray throughput against Mitsuba).
+
+What it shares with the other benchmarks (clocks, seeds, the Mitsuba variant, the time-to-equal-
+error arithmetic, the report) is harness.py.
 """
 
 from __future__ import annotations

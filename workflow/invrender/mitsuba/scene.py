@@ -97,14 +97,16 @@ def scene_to_mitsuba(
         )
 
     bsdf = mi.load_dict(bsdf or milo_bsdf(maps.kd, maps.ks, maps.ka))  # one instance shared by all meshes
-    out = {"type": "scene", "integrator": integrator or path_integrator(max_bounces), "sensor": sensor_dict(camera, spp, seed)}
+    out = {"type": "scene", "integrator": integrator or path_integrator(max_bounces),
+           "sensor": sensor_dict(camera, spp, seed)}
     kept = ~groups["hole"]
+    kinds = (("surfaces", kept & ~groups["emitter"], False), ("emitters", kept & groups["emitter"], True))
     materials = [("", np.ones(len(mesh.faces), bool), bsdf)]
     if lambertian_native:
         lambertian = lambertian_faces(scene)
         materials = [("", ~lambertian, bsdf), ("_lambertian", lambertian, mi.load_dict(diffuse_bsdf(maps.kd)))]
     for suffix, faces, material in materials:
-        for name, mask, emits in (("surfaces", kept & ~groups["emitter"], False), ("emitters", kept & groups["emitter"], True)):
+        for name, mask, emits in kinds:
             if not (mask & faces).any():
                 continue
             emitter = {"type": "area", "radiance": bitmap_texture(maps.ke)} if emits else None
