@@ -15,8 +15,8 @@ from invrender.synthesize.room import make_room
 
 # scalar_rgb (no libLLVM) calls the Python plugin once per sample, ~40x slower than Mitsuba's own
 # `diffuse`: there the images are smaller, and in the glossy case only the table stays glossy (the
-# walls' ks = 0.04 is set to 0, so they get Mitsuba's `diffuse`). Measured on 2 busy cores in
-# scalar_rgb: 18 s (diffuse) and 39 s (glossy); over 2-3 seed sets max |z| 3.2-4.3.
+# walls' ks = 0.04 is set to 0, so they get Mitsuba's `diffuse`). Measured on 2 shared cores in
+# scalar_rgb: 5-18 s (diffuse) and 15-39 s (glossy), by load; over 2-3 seed sets max |z| 3.2-4.3.
 LLVM = mb.DEFAULT_VARIANT.startswith("llvm")
 WIDTH, HEIGHT = (48, 36) if LLVM else (32, 24)
 BOUNCES = 3
