@@ -573,6 +573,21 @@ def test_classify_faces_by_the_texels_under_them():
         mb.scene_to_mitsuba(Scene(mesh, maps), camera, 1, 1, variant=VARIANTS[0])
 
 
+def test_lambertian_faces_keep_a_texel_of_margin_from_glossy_texels():
+    # an 8 x 8 atlas, one glossy texel at (row 2, column 5): v up, so it spans u in [5/8, 6/8),
+    # v in (5/8, 6/8]
+    maps = Maps.uniform(size=(8, 8), kd=0.5, ks=0.0)
+    maps.ks[2, 5] = 0.3
+    t = 1 / 8
+    uvs = np.array([[5.2 * t, 5.2 * t], [5.8 * t, 5.2 * t], [5.2 * t, 5.8 * t],  # on the glossy texel
+                    [6.2 * t, 5.2 * t], [6.8 * t, 5.2 * t], [6.2 * t, 5.8 * t],  # its neighbour: the margin
+                    [1.2 * t, 1.2 * t], [2.8 * t, 1.2 * t], [1.2 * t, 2.8 * t]], np.float32)  # far away
+    mesh = Mesh(np.random.default_rng(0).normal(size=(9, 3)).astype(np.float32), np.arange(9, dtype=np.int32).reshape(3, 3), uvs)
+    assert mb.lambertian_faces(Scene(mesh, maps)).tolist() == [False, False, True]
+    maps.ks[:] = 0.0
+    assert mb.lambertian_faces(Scene(mesh, maps)).all()
+
+
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_aovs_depth_and_uv(variant):
     mesh = quad([0, 0, 0], [1, 0, 0], [0, 1, 0])

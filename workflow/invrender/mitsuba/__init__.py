@@ -33,7 +33,6 @@ from .variant import DEFAULT_VARIANT, set_variant
 __all__ = [
     "DEFAULT_VARIANT", "KA_MIN", "bitmap_texture", "camera_to_world", "cube_to_latlong", "default_envmap_size",
     "diffuse_bsdf", "envmap_directions", "kd_parameter", "lambertian_faces", "llvm_available", "mesh_object",
-    "milo_bsdf",
-    "path_integrator", "prb_integrator", "render_aovs", "render_mitsuba", "scene_to_mitsuba",
+    "milo_bsdf", "path_integrator", "prb_integrator", "render_aovs", "render_mitsuba", "scene_to_mitsuba",
     "scene_to_mitsuba_diffuse", "sensor_dict", "set_variant",
 ]
