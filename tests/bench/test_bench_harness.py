@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from invrender.bench.render import subdivide_mesh, time_at_rmse
+import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
+from invrender.bench.harness import time_at_rmse
+from invrender.bench.render import QUICK, scalar_settings, subdivide_mesh
 from invrender.cli import main
 from invrender.synthesize.room import make_room
 
@@ -53,6 +55,8 @@ def test_equal_rmse_rows_for_3_and_10_bounces(quick_run):
     assert {(r["bounces"], r["renderer"]) for r in report["curves"]} == {
         (b, n) for b in (3, 10) for n in ("invrender", "mitsuba")}
     assert len(report["one_time"]) == 4
+    settings = QUICK if report["mitsuba_variant"] == "llvm_ad_rgb" else scalar_settings(QUICK)
+    assert [row["width"] for row in rows] == [settings.width] * 2
 
 
 def test_bvh_features_and_profile_rows(quick_run):
@@ -100,17 +104,28 @@ def test_subdivision_is_watertight_and_keeps_area_and_winding():
     assert open_edges(fine) == 3 * open_edges(mesh)  # the room's own open edges, each cut in 3
 
 
-def test_scalar_fallback_says_so(tmp_path, monkeypatch):
-    monkeypatch.setenv("INVRENDER_BENCH_MITSUBA_VARIANT", "scalar_rgb")
+@pytest.fixture(scope="module")
+def fallback_run(quick_run, tmp_path_factory):
+    """A quick run against scalar_rgb: without libLLVM, the quick run itself; with it, forced."""
+    if mb.DEFAULT_VARIANT == "scalar_rgb":
+        return quick_run[1]
+    from invrender.bench.harness import VARIANT_ENV
     from invrender.bench.render import run
 
-    from invrender.render import mitsuba_bridge
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(VARIANT_ENV, "scalar_rgb")
+        try:
+            return run(quick=True, out=tmp_path_factory.mktemp("fallback"))
+        finally:  # later tests in this process expect the default variant
+            mb.set_variant(mb.DEFAULT_VARIANT)
 
-    try:
-        report = run(quick=True, out=tmp_path)
-    finally:  # later tests in this process expect the default variant
-        mitsuba_bridge.set_variant(mitsuba_bridge.DEFAULT_VARIANT)
-    assert report["mitsuba_variant"] == "scalar_rgb"
-    assert any("scalar_rgb" in note for note in report["notes"])
-    assert report["equal_rmse"][0]["width"] == 16
-    assert all(_finite_positive(row["ratio"]) for row in report["equal_rmse"])
+
+def test_default_variant_is_llvm_if_libllvm_is_there(quick_run):
+    assert quick_run[1]["mitsuba_variant"] == ("llvm_ad_rgb" if mb.llvm_available() else "scalar_rgb")
+
+
+def test_scalar_fallback_says_so(fallback_run):
+    assert fallback_run["mitsuba_variant"] == "scalar_rgb"
+    assert any("scalar_rgb" in note for note in fallback_run["notes"])
+    assert fallback_run["equal_rmse"][0]["width"] == 16
+    assert all(_finite_positive(row["ratio"]) for row in fallback_run["equal_rmse"])

@@ -8,12 +8,14 @@ it (no forward/backward correlation to worry about).
 
 Mitsuba's side, chosen by what is installed:
 - `prb` (path replay backpropagation, `llvm_ad_rgb`): its gradient of the same loss w.r.t. the
-  kd bitmap of a two-sided `diffuse` BSDF (render/mitsuba_bridge.py, `scene_to_mitsuba_diffuse`),
+  kd bitmap of a two-sided `diffuse` BSDF (invrender/mitsuba/, `scene_to_mitsuba_diffuse`),
   compared in 4 x 4 texel blocks per channel;
-- central differences of `scalar_rgb` renders with common random numbers (one seed for both
-  sides of a difference; with no Russian roulette and kd-independent sampling the paths are the
-  same), kd of one surface's tile moved at a time, compared per surface and channel. This runs
-  whether or not LLVM is usable, so the fallback is exercised here too.
+- central differences of renders in the default variant (`llvm_ad_rgb` or, without LLVM,
+  `scalar_rgb`) with common random numbers (one seed for both sides of a difference; with no
+  Russian roulette and kd-independent sampling the paths are the same), kd of one surface's tile
+  moved at a time, compared per surface and channel. This runs in either variant, so a machine
+  without LLVM checks the gradient too (tests/bench runs the scalar_rgb fallback where LLVM is
+  usable).
 
 Each side's mean over independent seeds has a standard error from the spread over the seeds;
 the two must agree within Z_MAX combined standard errors beyond a relative SLACK. The same check
@@ -28,11 +30,13 @@ import pytest
 from testscenes import look_at_camera, quad
 
 # The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
-import invrender.render.mitsuba_bridge as mb  # isort: skip
-from invrender.render.adjoint import backward  # noqa: E402
-from invrender.render.features import Features  # noqa: E402
-from invrender.render.renderer import Renderer, pixel_requests  # noqa: E402
-from invrender.scene.types import Maps, Mesh, Scene  # noqa: E402
+import invrender.mitsuba as mb  # noqa: I001
+import drjit as dr
+import mitsuba as mi
+from invrender.render.adjoint import backward
+from invrender.render.features import Features
+from invrender.render.renderer import Renderer, pixel_requests
+from invrender.scene.types import Maps, Mesh, Scene
 
 BOUNCES = 3
 TILE, GRID = 8, 4  # atlas GRID x GRID tiles of TILE x TILE texels: 32 x 32
@@ -104,7 +108,6 @@ def ours(room):
 def mitsuba_prb(scene, camera, weights) -> np.ndarray:
     """Mitsuba's d Loss / d kd, one (N, N, 3) map per seed: mi.render with the kd bitmap
     tracking gradients, dr.backward of the loss."""
-    mi, dr = mb.mi, mb.dr
     loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(scene, camera, BOUNCES, SPP, "llvm_ad_rgb",
                                                       integrator=mb.prb_integrator(BOUNCES)), parallel=False)
     params = mi.traverse(loaded)
@@ -123,12 +126,11 @@ def mitsuba_prb(scene, camera, weights) -> np.ndarray:
 
 def mitsuba_central_differences(scene, camera, weights, tiles) -> np.ndarray:
     """(seeds, surfaces, 3): d Loss / d(kd of every texel of a surface's tile, per channel) by
-    central differences of scalar_rgb renders with common random numbers. Channels do not mix in
+    central differences of renders with common random numbers. Channels do not mix in
     RGB, so one pair of renders per surface gives all three."""
-    mi = mb.mi
     loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(
-        scene, camera, BOUNCES, FD_SPP, "scalar_rgb",
-        integrator={"type": "path", "max_depth": BOUNCES + 1, "rr_depth": BOUNCES + 2}), parallel=False)
+        scene, camera, BOUNCES, FD_SPP, mb.DEFAULT_VARIANT,
+        integrator=mb.path_integrator(BOUNCES)), parallel=False)
     params = mi.traverse(loaded)
     key = mb.kd_parameter(params)
     kd = np.array(params[key], np.float32)
@@ -187,8 +189,8 @@ def wrong_versions(grad: np.ndarray) -> dict[str, np.ndarray]:
     return {f"scaled by {WRONG_SCALE}": WRONG_SCALE * grad, "atlas rows flipped": grad[..., ::-1, :, :]}
 
 
-# prb where Mitsuba's LLVM backend works (the bridge's default variant); the central differences
-# everywhere, so the fallback is exercised on machines that have LLVM too.
+# prb where Mitsuba's LLVM backend works (the bridge's default variant); the central differences in
+# either variant (without LLVM, the only check).
 METHODS = (["prb"] if mb.DEFAULT_VARIANT == "llvm_ad_rgb" else []) + ["central differences"]
 
 
@@ -198,11 +200,8 @@ def test_kd_gradient_matches_mitsuba(room, ours, method):
     if method == "prb":
         theirs, aggregate, what = block_sums(mitsuba_prb(scene, camera, weights)), block_sums, "prb, 4x4 blocks"
     else:
-        try:
-            theirs = mitsuba_central_differences(scene, camera, weights, tiles)
-        finally:  # the rest of the session renders in the default variant
-            mb.set_variant(mb.DEFAULT_VARIANT)
-        aggregate, what = (lambda grad: tile_sums(grad, tiles)), "scalar_rgb central differences, per surface"
+        theirs = mitsuba_central_differences(scene, camera, weights, tiles)
+        aggregate, what = (lambda grad: tile_sums(grad, tiles)), f"{mb.DEFAULT_VARIANT} central differences, per surface"
     check(aggregate(ours), theirs, what)
     for name, wrong in wrong_versions(ours).items():
         z = excess_z(aggregate(wrong), theirs)

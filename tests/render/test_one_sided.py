@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from testscenes import box_room, look_at_camera
 
-from invrender.render import mitsuba_bridge as mb
+import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
 from invrender.render.adjoint import backward
 from invrender.render.analysis import analyse_scene
 from invrender.render.features import Features

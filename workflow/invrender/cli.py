@@ -203,8 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ignore the invrender: attributes: the scene other USD tools see")
     p.set_defaults(func=cmd_import_usd)
 
+    from .bench import BENCHMARKS
+
     p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
-    p.add_argument("what", choices=["render", "gradients"])
+    p.add_argument("what", choices=list(BENCHMARKS))
     p.add_argument("--quick", action="store_true", help="small sizes, to check the harness")
     p.add_argument("--out", default="docs/benchmarks", help="where the tables and plots go")
     p.add_argument("--device")

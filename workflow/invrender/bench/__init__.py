@@ -5,26 +5,25 @@
 - ``blender``: Blender's Cycles against ours on the room's USD export, variant by variant
   (``python -m invrender.bench.blender``; its Blender side is ``blender_client.py``, run in
   Blender's own interpreter; docs/export.md, "Blender").
+- ``export``: what the USD export loses: round trip, standard view, GGX in Mitsuba 3 (``export.py``;
+  docs/export.md).
 
+``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
 subprocess of the BVH measurement) does not find its module already imported.
 """
 
 from __future__ import annotations
 
-BENCHMARKS = ("render", "gradients")
+import importlib
+
+BENCHMARKS = ("render", "gradients", "export")  # each a module here with run(quick, out, device)
 
 
 def run_benchmark(what: str, args) -> dict:
     """Run benchmark ``what`` with the CLI's namespace (quick, out, device); returns its results."""
-    if what == "render":
-        from .render import run
-
-        return run(quick=bool(getattr(args, "quick", False)), out=getattr(args, "out", "docs/benchmarks"),
-                   device=getattr(args, "device", None))
-    if what == "gradients":
-        from .gradients import run
-
-        return run(quick=bool(getattr(args, "quick", False)), out=getattr(args, "out", "docs/benchmarks"),
-                   device=getattr(args, "device", None))
-    raise ValueError(f"bench: expected one of {list(BENCHMARKS)}, got {what!r}")
+    if what not in BENCHMARKS:
+        raise ValueError(f"bench: expected one of {list(BENCHMARKS)}, got {what!r}")
+    run = importlib.import_module(f".{what}", __name__).run
+    return run(quick=bool(getattr(args, "quick", False)), out=getattr(args, "out", "docs/benchmarks"),
+               device=getattr(args, "device", None))

@@ -71,8 +71,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .render import (PeakRSS, _clock, _median, _next_seed_block, _quiet_pyopencl, choose_variant, fit_model,
-                     format_table, machine_info, model_time, plot, room_scene, time_at_rmse, verdict, write_csv)
+from .harness import (PeakRSS, choose_variant, clock, fit_model, machine_info, median, model_time, next_seed_block,
+                      plot, quiet_pyopencl, room_scene, time_at_rmse, verdict, write_report)
 
 log = logging.getLogger("invrender.bench")
 
@@ -129,7 +129,7 @@ def lambertian_room(width: int, height: int):
     kd = START_KD wherever the room's kd is not 0 (lights and window openings stay black)."""
     from ..scene.types import Maps, Scene
 
-    scene, _ = room_scene(replace(FULL, width=width, height=height))
+    scene, _ = room_scene(width, height)
     m = scene.maps
     true = Scene(scene.mesh, Maps(kd=m.kd, ks=np.zeros_like(m.ks), ka=m.ka, ke=m.ke, kw=m.kw, kg=m.kg), scene.cameras)
     covered = np.any(m.kd > 0, -1)
@@ -141,7 +141,7 @@ def lambertian_room(width: int, height: int):
 def target_image(true_scene, camera, features, spp: int, device=None) -> np.ndarray:
     from ..render.renderer import Renderer
 
-    _quiet_pyopencl()
+    quiet_pyopencl()
     return Renderer(true_scene, features, device).render(camera, spp, seed=987_654, aovs=False)["radiance"]
 
 
@@ -183,14 +183,14 @@ class InvrenderGradient:
         from ..render.renderer import Renderer, pixel_requests
         from ..render.scene_buffers import HostScene
 
-        _quiet_pyopencl()
+        quiet_pyopencl()
         self.camera, self.one_time = camera, {}
         if host is None:
-            host, self.one_time["pack_s"], _ = _clock(HostScene.pack, scene.mesh, scene.maps)
-        self.renderer, self.one_time["init_s"], _ = _clock(Renderer, scene, features, device, host_scene=host)
+            host, self.one_time["pack_s"], _ = clock(HostScene.pack, scene.mesh, scene.maps)
+        self.renderer, self.one_time["init_s"], _ = clock(Renderer, scene, features, device, host_scene=host)
         self.requests = pixel_requests(camera, 0, self.renderer.ray_offset(camera))
         self.target = np.asarray(target, np.float32).reshape(-1, 3)
-        self._seed = _next_seed_block()
+        self._seed = next_seed_block()
         self.last = {}
 
     def gradient(self, spp: int, accumulation: str = "fixed") -> np.ndarray:
@@ -221,7 +221,7 @@ class InvrenderGradient:
         return np.asarray(grads["kd"], np.float64)
 
     def warm_up(self, spp: int = 1):
-        _, self.one_time["first_pass_s"], _ = _clock(self.gradient, spp)
+        _, self.one_time["first_pass_s"], _ = clock(self.gradient, spp)
 
     def new_maps(self, maps):
         """An optimiser's step: new maps to the device (the BVH stays)."""
@@ -232,22 +232,21 @@ class MitsubaGradient:
     name = "mitsuba"
 
     def __init__(self, scene, camera, bounces: int, variant: str, target: np.ndarray):
+        from .. import mitsuba as bridge  # noqa: I001 - first: it points drjit at a usable libLLVM
         import drjit as dr
         import mitsuba as mi
 
-        from ..render import mitsuba_bridge as bridge
-
         self.mi, self.dr, self.one_time = mi, dr, {}
-        scene_dict, self.one_time["convert_s"], _ = _clock(
+        scene_dict, self.one_time["convert_s"], _ = clock(
             bridge.scene_to_mitsuba_diffuse, scene, camera, bounces, 1, variant,
             integrator=bridge.prb_integrator(bounces))
-        self.scene, self.one_time["load_s"], _ = _clock(mi.load_dict, scene_dict, parallel=False)
+        self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
         self.params = mi.traverse(self.scene)
         self.key = bridge.kd_parameter(self.params)
         dr.enable_grad(self.params[self.key])
         self.params.update()
         self.target = mi.TensorXf(np.ascontiguousarray(target, np.float32))
-        self._seed = _next_seed_block()
+        self._seed = next_seed_block()
         self.warmed: dict[int, float] = {}
         self.last = {}
 
@@ -281,7 +280,7 @@ class MitsubaGradient:
     def warm_up(self, spp: int = 1):
         """The first pass at an spp compiles its kernels (or finds them in drjit's cache)."""
         if spp not in self.warmed:
-            self.warmed[spp] = _clock(self.gradient, spp)[1]
+            self.warmed[spp] = clock(self.gradient, spp)[1]
         self.one_time["first_pass_s"] = self.warmed.get(1, next(iter(self.warmed.values())))
 
     def new_maps(self, maps):
@@ -299,7 +298,7 @@ class MitsubaGradient:
 
 def _median_or_none(values):
     values = [v for v in values if v is not None]
-    return _median(values) if values else None
+    return median(values) if values else None
 
 
 def _mean_or_none(values):
@@ -316,7 +315,7 @@ def reference(runners, settings: Settings, covered: np.ndarray, desc: str):
     for runner in runners:
         halves, walls, images = [[], []], [], []
         for k in tqdm(range(passes), desc=f"{desc} {runner.name}", unit="pass", leave=False):
-            grad, wall, _ = _clock(runner.gradient, settings.ref_pass_spp)
+            grad, wall, _ = clock(runner.gradient, settings.ref_pass_spp)
             halves[k % 2].append(grad[covered])
             walls.append(wall)
             images.append(runner.image.astype(np.float64))
@@ -358,7 +357,7 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
     from ..render.analysis import analyse
 
     features = replace(analyse(start, device=device), max_bounces=bounces)
-    target, target_s, _ = _clock(target_image, true, camera, features, settings.target_spp, device)
+    target, target_s, _ = clock(target_image, true, camera, features, settings.target_spp, device)
     inv = InvrenderGradient(start, camera, features, target, device)
     inv.warm_up()
     runners = [inv]
@@ -378,7 +377,7 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]  # as bench render
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="pass", leave=False):
         for runner in (runners if rep % 2 == 0 else runners[::-1]):
-            grad, wall, cpu = _clock(runner.gradient, spp)
+            grad, wall, cpu = clock(runner.gradient, spp)
             mse = float(np.mean((grad[covered] - ref) ** 2))
             records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse, **runner.last})
 
@@ -401,10 +400,10 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
             mse_raw = float(np.mean([r["mse"] for r in mine]))
             mse = max(mse_raw - ref_noise, 1e-3 * mse_raw)  # the reference's own noise removed
             rows.append({"section": "curves", "bounces": bounces, "renderer": runner.name, "spp": spp,
-                         "wall_s": _median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
-                         "cpu_s": _median([r["cpu"] for r in mine]),
-                         "forward_s": _median([r["forward_s"] for r in mine]),
-                         "backward_s": _median([r["backward_s"] for r in mine]),
+                         "wall_s": median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
+                         "cpu_s": median([r["cpu"] for r in mine]),
+                         "forward_s": median([r["forward_s"] for r in mine]),
+                         "backward_s": median([r["backward_s"] for r in mine]),
                          "adjoint_runs": _mean_or_none([r.get("adjoint_runs") for r in mine]),
                          "rmse": math.sqrt(mse), "rmse_raw": math.sqrt(mse_raw), "rel_rmse": math.sqrt(mse) / ref_rms,
                          "repeats": len(mine)})
@@ -461,14 +460,14 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
             p["var_vs_other"] = p["var_per_sample"] / other["var_per_sample"]
             p["backward_var_vs_other"] = p["backward_var_per_sample"] / max(other["backward_var_per_sample"], 1e-300)
 
-    one_steady = {r.name: _median([x["wall"] for x in records if x["renderer"] == r.name and x["spp"] == settings.ladder[0]])
+    one_steady = {r.name: median([x["wall"] for x in records if x["renderer"] == r.name and x["spp"] == settings.ladder[0]])
                   for r in runners}
     one_time = [{"section": "one_time", "bounces": bounces, "renderer": "invrender",
                  "scene_s": inv.one_time["pack_s"], "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
                  "setup_s": inv.one_time["init_s"], "setup_what": "upload + render kernel build",
                  "first_pass_s": inv.one_time["first_pass_s"], "first_what": "+ adjoint kernel build",
-                 "steady_pass_s": one_steady["invrender"], "maps_step_s": _median(
-                     [_clock(inv.new_maps, start.maps)[1] for _ in range(3)]), "maps_what": "Renderer.set_maps"}]
+                 "steady_pass_s": one_steady["invrender"], "maps_step_s": median(
+                     [clock(inv.new_maps, start.maps)[1] for _ in range(3)]), "maps_what": "Renderer.set_maps"}]
     if len(runners) > 1:
         mit = runners[1]
         one_time.append({"section": "one_time", "bounces": bounces, "renderer": f"mitsuba {variant} prb",
@@ -477,7 +476,7 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
                          "first_pass_s": mit.one_time["first_pass_s"],
                          "first_what": "JIT; first pass at each spp: " + ", ".join(f"{k}: {v:.2f}" for k, v in sorted(mit.warmed.items())),
                          "steady_pass_s": one_steady["mitsuba"],
-                         "maps_step_s": _median([_clock(mit.new_maps, start.maps)[1] for _ in range(3)]),
+                         "maps_step_s": median([clock(mit.new_maps, start.maps)[1] for _ in range(3)]),
                          "maps_what": "params[kd] = ...; params.update()"})
     return row, curves, one_time, profile
 
@@ -515,12 +514,12 @@ def memory_probe(renderer: str, side: int, bounces: int, accumulation: str, vari
     gc.collect()
     setup_mb = _rss_mb()
     with PeakRSS() as first:
-        _, first_s, _ = _clock(run)
+        _, first_s, _ = clock(run)
     gc.collect()
     flush()
     before_second = _rss_mb()
     with PeakRSS() as second:
-        _, second_s, second_cpu = _clock(run)
+        _, second_s, second_cpu = clock(run)
     return {"section": "memory", "renderer": renderer if renderer == "invrender" else f"mitsuba {variant} prb",
             "accumulation": accumulation if renderer == "invrender" else "-", "rays": side * side,
             "bounces": bounces, "rss_after_setup_mb": setup_mb, "first_pass_growth_mb": first.growth / 2**20,
@@ -573,7 +572,7 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
             pair = {}
             for mode in (("fixed", "buckets") if rep % 2 == 0 else ("buckets", "fixed")):
                 seed = runner._seed
-                grad, wall, _ = _clock(runner.gradient, settings.accumulation_spp, mode)
+                grad, wall, _ = clock(runner.gradient, settings.accumulation_spp, mode)
                 runner._seed = seed  # both modes trace the same samples: their sums differ by rounding only
                 times[mode].append((wall, runner.last["backward_s"]))
                 runs[mode].append(runner.last["adjoint_runs"])
@@ -582,7 +581,7 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
             runner._seed += 1
             scale = float(np.abs(pair["fixed"]).max())
             diffs.append(float(np.abs(pair["buckets"] - pair["fixed"]).max()) / max(scale, 1e-300))
-        med = {mode: (_median([t[0] for t in v]), _median([t[1] for t in v])) for mode, v in times.items()}
+        med = {mode: (median([t[0] for t in v]), median([t[1] for t in v])) for mode, v in times.items()}
         rows.append({"section": "accumulation", "bounces": bounces, "rays": camera.width * camera.height,
                      "spp": settings.accumulation_spp, "repeats": settings.accumulation_repeats,
                      "backward_fixed_s": med["fixed"][1], "backward_buckets_s": med["buckets"][1],
@@ -649,7 +648,7 @@ SECTIONS = ("equal_error", "one_time", "curves", "profile", "memory", "accumulat
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
-    _quiet_pyopencl()
+    quiet_pyopencl()
     settings = QUICK if quick else FULL
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -700,23 +699,10 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
               "accumulations": list(accumulations), "settings": asdict(settings), "machine": machine,
               "seconds": time.time() - started, "notes": notes, **results}
 
-    text = [f"# invrender bench gradients ({settings.mode}; Mitsuba {variant} prb; {camera.width}x{camera.height}, "
-            f"room view {settings.view}, d loss / d kd of a {covered.shape[1]}x{covered.shape[0]} atlas; "
-            f"{report['seconds']:.0f} s)", ""]
-    for key in SECTIONS:
-        title, columns = TABLES[key]
-        text.append(format_table(title, columns, results[key]))
-    text.append("Machine: " + ", ".join(f"{k}={v}" for k, v in machine.items()))
-    for n in notes:
-        text.append(f"NOTE: {n}")
-    table = "\n".join(text) + "\n"
-
-    (out / "gradients.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
-    for key in SECTIONS:
-        write_csv(out / f"gradients_{key}.csv", results[key])
-    (out / "gradients_table.md").write_text(table)
-    sys.stdout.write(table)
-    sys.stdout.flush()
+    title = (f"# invrender bench gradients ({settings.mode}; Mitsuba {variant} prb; {camera.width}x{camera.height}, "
+             f"room view {settings.view}, d loss / d kd of a {covered.shape[1]}x{covered.shape[0]} atlas; "
+             f"{report['seconds']:.0f} s)")
+    write_report(out, "gradients", title, report, TABLES, SECTIONS)
     return report
 
 
@@ -731,7 +717,7 @@ def _main(argv=None) -> int:
     p.add_argument("--variant", default="llvm_ad_rgb")
     p.add_argument("--device")
     args = parser.parse_args(argv)
-    _quiet_pyopencl()
+    quiet_pyopencl()
     result = memory_probe(args.renderer, args.side, args.bounces, args.accumulation, args.variant, args.device)
     print(PROBE_MARK + json.dumps(result), flush=True)
     return 0

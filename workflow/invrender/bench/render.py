@@ -30,20 +30,20 @@ is installed). docs/benchmarks.md ("Renderer") has the method, a full run and it
    window or sky and on the default room: time per sample, ratio, image agreement.
 4. **Profile**: where invrender's time and variance go (sampling strategies compiled out,
    mixture weights, one-bounce ray throughput against Mitsuba).
+
+What it shares with the other benchmarks (clocks, seeds, the Mitsuba variant, the time-to-equal-
+error arithmetic, the report) is harness.py.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import logging
 import math
 import os
-import platform
 import subprocess
 import sys
-import threading
 import time
 import warnings
 from dataclasses import asdict, dataclass, replace
@@ -52,13 +52,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .harness import (PeakRSS, clock, choose_variant, fit_model, machine_info, median, model_time,
+                      next_seed_block, plot, quiet_pyopencl, room_scene, time_at_rmse, verdict, write_report)
+
 log = logging.getLogger("invrender.bench")
 
 ROOM_VIEW = 2  # the room view that shows the glossy table, the window, floor and walls
 LAUNCH_SAMPLES = 2_000_000  # path samples per launch / Mitsuba pass (as render/renderer.py)
-VARIANT_ENV = "INVRENDER_BENCH_MITSUBA_VARIANT"  # force a Mitsuba variant (e.g. scalar_rgb)
 PROBE_MARK = "BVHPROBE "
-MIN_SPP_TO_JUDGE = 1000  # fewer samples per pixel: no verdict on whether two images agree
 
 
 @dataclass(frozen=True)
@@ -101,32 +102,6 @@ def scalar_settings(settings: Settings) -> Settings:
 # ---------------------------------------------------------------------------------------------
 # Small helpers
 # ---------------------------------------------------------------------------------------------
-
-
-def _clock(fn, *args, **kwargs):
-    """(result, wall seconds, CPU seconds of this process: all its threads)."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - wall, time.process_time() - cpu
-
-
-def _median(values) -> float:
-    return float(np.median(np.asarray(values, np.float64)))
-
-
-def _quiet_pyopencl():
-    # Renderer.render looks its kernel up per call; pyopencl warns each time (a cost we measure).
-    warnings.filterwarnings("ignore", message=".*has been retrieved more than once.*")
-
-
-def room_scene(settings: Settings, config: dict | None = None):
-    from ..synthesize.room import make_room
-
-    config = dict(config or {})
-    if settings.width:
-        config["cameras"] = {"width": int(settings.width), "height": int(settings.height)}
-    scene, metadata = make_room(config)
-    return scene, metadata
 
 
 def diffuse_variant(scene):
@@ -186,48 +161,6 @@ def subdivisions_for(base_triangles: int, target: int) -> int:
     return max(1, int(round(math.sqrt(target / base_triangles))))
 
 
-class PeakRSS:
-    """Peak resident set size above the level at entry, polled every 2 ms by a thread
-    (psutil), with getrusage's ru_maxrss growth as a floor when psutil is missing."""
-
-    def __enter__(self):
-        import resource
-
-        self._resource = resource
-        try:
-            import psutil
-
-            self._process = psutil.Process()
-        except ImportError:
-            self._process = None
-        self.start = self._rss()
-        self.peak = self.start
-        self._maxrss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-        self._stop = threading.Event()
-        if self._process is not None:
-            self._thread = threading.Thread(target=self._poll, daemon=True)
-            self._thread.start()
-        return self
-
-    def _rss(self) -> int:
-        if self._process is not None:
-            return int(self._process.memory_info().rss)
-        return self._resource.getrusage(self._resource.RUSAGE_SELF).ru_maxrss * 1024
-
-    def _poll(self):
-        while not self._stop.wait(0.002):
-            self.peak = max(self.peak, self._rss())
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        if self._process is not None:
-            self._thread.join()
-        self.peak = max(self.peak, self._rss())
-        maxrss = self._resource.getrusage(self._resource.RUSAGE_SELF).ru_maxrss * 1024
-        self.growth = max(self.peak - self.start, maxrss - self._maxrss0)
-        return False
-
-
 def _kernel_cached(features, device=None) -> str:
     """Whether the render kernel for these features is in the binary cache already ("hit",
     "miss"; "unknown" if render/program.py's private key function changed)."""
@@ -247,14 +180,6 @@ def _kernel_cached(features, device=None) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
-_seed_blocks = iter(range(1, 2**31, 100_003))
-
-
-def _next_seed_block() -> int:
-    """Every runner draws its seeds from its own block, so no two renders share random numbers."""
-    return next(_seed_blocks)
-
-
 class InvrenderRunner:
     name = "invrender"
 
@@ -262,13 +187,13 @@ class InvrenderRunner:
         from ..render.renderer import Renderer
         from ..render.scene_buffers import HostScene
 
-        _quiet_pyopencl()
+        quiet_pyopencl()
         self.camera, self.features, self.one_time = camera, features, {}
         if host is None:
-            host, self.one_time["pack_s"], _ = _clock(HostScene.pack, scene.mesh, scene.maps)
+            host, self.one_time["pack_s"], _ = clock(HostScene.pack, scene.mesh, scene.maps)
         self.one_time["kernel_cache"] = _kernel_cached(features, device)
-        self.renderer, self.one_time["init_s"], _ = _clock(Renderer, scene, features, device, w_env, w_emit, host)
-        self._seed = _next_seed_block()
+        self.renderer, self.one_time["init_s"], _ = clock(Renderer, scene, features, device, w_env, w_emit, host)
+        self._seed = next_seed_block()
 
     def render_full(self, spp: int) -> dict:
         self._seed += 1
@@ -278,25 +203,24 @@ class InvrenderRunner:
         return self.render_full(spp)["radiance"]
 
     def warm_up(self):
-        _, self.one_time["first_render_s"], _ = _clock(self.render, 1)
+        _, self.one_time["first_render_s"], _ = clock(self.render, 1)
 
 
 class MitsubaRunner:
     name = "mitsuba"
 
     def __init__(self, scene, camera, bounces, variant):
+        from .. import mitsuba as bridge  # noqa: I001 - first: it points drjit at a usable libLLVM
         import mitsuba as mi
-
-        from ..render import mitsuba_bridge as bridge
 
         self.mi, self.camera, self.one_time = mi, camera, {}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            scene_dict, self.one_time["convert_s"], _ = _clock(bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant)
+            scene_dict, self.one_time["convert_s"], _ = clock(bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant)
         self.bridge_warnings = sorted({str(w.message) for w in caught})
-        self.scene, self.one_time["load_s"], _ = _clock(mi.load_dict, scene_dict, parallel=False)
+        self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
         self.per_pass = max(1, LAUNCH_SAMPLES // (camera.width * camera.height))
-        self._seed = _next_seed_block()
+        self._seed = next_seed_block()
 
     def render(self, spp: int) -> np.ndarray:
         """Passes of at most LAUNCH_SAMPLES path samples (as invrender's launches), averaged."""
@@ -310,64 +234,12 @@ class MitsubaRunner:
         return (total / spp).astype(np.float32)
 
     def warm_up(self):
-        _, self.one_time["first_render_s"], _ = _clock(self.render, 1)
-
-
-def choose_variant() -> tuple[str, str | None]:
-    """The Mitsuba variant to compare against and, if it is not llvm_ad_rgb, why."""
-    from ..render import mitsuba_bridge as bridge
-    import mitsuba as mi
-
-    forced = os.environ.get(VARIANT_ENV)
-    if forced:
-        note = None if forced == "llvm_ad_rgb" else f"Mitsuba variant forced to {forced} by ${VARIANT_ENV}"
-        return forced, note
-    if bridge.DEFAULT_VARIANT == "llvm_ad_rgb" and "llvm_ad_rgb" in mi.variants():
-        return "llvm_ad_rgb", None
-    return "scalar_rgb", (
-        "Mitsuba's llvm_ad_rgb variant is unavailable (no libLLVM >= 16 found; Debian: apt-get install "
-        "libllvm19, or set DRJIT_LIBLLVM_PATH). Comparing against scalar_rgb instead, a much weaker peer "
-        "(one lane, the Python milo BSDF called per sample), at a reduced image size and ladder.")
+        _, self.one_time["first_render_s"], _ = clock(self.render, 1)
 
 
 # ---------------------------------------------------------------------------------------------
 # 1. Time to equal RMSE
 # ---------------------------------------------------------------------------------------------
-
-
-def time_at_rmse(times, rmses, target) -> tuple[float, bool]:
-    """Time at which a (time, RMSE) ladder reaches `target`: log-log interpolation between the
-    bracketing rungs; c / sqrt(t) extrapolation from the nearest end (flag True) outside."""
-    t = np.maximum.accumulate(np.asarray(times, np.float64))
-    r = np.minimum.accumulate(np.asarray(rmses, np.float64))
-    if target < r[-1]:
-        return float(t[-1] * (r[-1] / target) ** 2), True
-    if target >= r[0]:
-        return float(t[0] * (r[0] / target) ** 2), target > r[0]
-    k = int(np.nonzero(r <= target)[0][0])  # first rung at or below the target; k >= 1
-    r0, r1, t0, t1 = r[k - 1], r[k], t[k - 1], t[k]
-    if r0 == r1:
-        return float(t1), False
-    s = (math.log(r0) - math.log(target)) / (math.log(r0) - math.log(r1))
-    return float(math.exp(math.log(t0) + s * (math.log(t1) - math.log(t0)))), False
-
-
-def fit_model(spps, times, rmses) -> dict:
-    """RMSE = k / sqrt(spp) and t = a + b spp, i.e. RMSE = k sqrt(b) / sqrt(t - a): the
-    c / sqrt(t) law with a fixed per-call cost a. k = median of rmse sqrt(spp) over the upper
-    half of the ladder; (a, b) by Theil-Sen (median of pairwise slopes), so one rung timed
-    during a burst of load from other processes does not move the fit."""
-    spps, times, rmses = (np.asarray(v, np.float64) for v in (spps, times, rmses))
-    half = len(spps) // 2
-    k = _median(rmses[half:] * np.sqrt(spps[half:]))
-    pairs = [(times[j] - times[i]) / (spps[j] - spps[i]) for i in range(len(spps)) for j in range(i + 1, len(spps))]
-    b = max(_median(pairs), 1e-30)
-    a = _median(times - b * spps)
-    return {"k": k, "a": a, "b": b}
-
-
-def model_time(model: dict, target: float) -> float:
-    return max(model["a"], 0.0) + model["b"] * (model["k"] / target) ** 2
 
 
 def reference(runners, spps, progress_desc):
@@ -377,7 +249,7 @@ def reference(runners, spps, progress_desc):
     jobs = [(runner, spp // 2, half) for runner, spp in zip(runners, spps) for half in (0, 1)]
     halves = {}
     for runner, spp, half in tqdm(jobs, desc=progress_desc, unit="half", leave=False):
-        image, wall, _ = _clock(runner.render, max(1, spp))
+        image, wall, _ = clock(runner.render, max(1, spp))
         halves.setdefault(runner.name, []).append((image.astype(np.float64), wall, max(1, spp)))
     for name, ((a, wa, n), (b, wb, _)) in halves.items():
         noise = float(np.mean((a - b) ** 2) / 4.0)  # MSE of (a + b) / 2 from its own noise
@@ -410,19 +282,6 @@ def agreement(a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var
             "pixel_excess_rmse": math.sqrt(max(0.0, mse - var_a - var_b))}
 
 
-def verdict(check: dict, spp: int, tolerance: float = 0.01) -> str:
-    """"agree" (|mean rel diff| <= tolerance), "DIFFER" (beyond it by more than 3 sigma of the
-    noise: a bug to report, not noise) or "unresolved" (beyond it, but within the noise);
-    "not checked" below MIN_SPP_TO_JUDGE samples per pixel, where the sun's rare bright paths
-    are missing from the sample and its noise estimate is not to be trusted (quick runs)."""
-    diff, sigma = abs(check["mean_rel_diff"]), check["mean_rel_sigma"]
-    if spp < MIN_SPP_TO_JUDGE:
-        return "not checked"
-    if diff <= tolerance:
-        return "agree"
-    return "DIFFER" if diff - tolerance > 3 * sigma else "unresolved"
-
-
 def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
     from ..render.analysis import analyse
 
@@ -447,7 +306,7 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="render", leave=False):
         for runner in (runners if rep % 2 == 0 else runners[::-1]):
-            image, wall, cpu = _clock(runner.render, spp)
+            image, wall, cpu = clock(runner.render, spp)
             mse = float(np.mean((image.astype(np.float64) - ref) ** 2))
             records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse})
 
@@ -461,8 +320,8 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
             mse_raw = float(np.mean([r["mse"] for r in mine]))
             mse = max(mse_raw - ref_noise, 1e-3 * mse_raw)  # the reference's own noise removed
             rows.append({"section": "curves", "bounces": bounces, "renderer": runner.name, "spp": spp,
-                         "wall_s": _median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
-                         "cpu_s": _median([r["cpu"] for r in mine]), "rmse": math.sqrt(mse),
+                         "wall_s": median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
+                         "cpu_s": median([r["cpu"] for r in mine]), "rmse": math.sqrt(mse),
                          "rmse_raw": math.sqrt(mse_raw), "repeats": len(mine)})
         curves += rows
         top = rows[-1]
@@ -499,7 +358,7 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
         "pixel_mse_over_noise": check["pixel_mse_over_noise"], "agreement": verdict(check, min(c["spp"] for c in converged.values())),
         "features": asdict(features), "bridge_warnings": mit.bridge_warnings,
     }
-    one_steady = {name: _median([r["wall"] for r in records if r["renderer"] == name and r["spp"] == settings.ladder[0]])
+    one_steady = {name: median([r["wall"] for r in records if r["renderer"] == name and r["spp"] == settings.ladder[0]])
                   for name in ("invrender", "mitsuba")}
     one_time = [
         {"section": "one_time", "bounces": bounces, "renderer": "invrender",
@@ -535,7 +394,7 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     from ..render.scene_buffers import GEOMETRY_ARGS, SCENE_ARGS, HostScene
     from ..scene.types import Scene
 
-    base, _ = room_scene(settings)
+    base, _ = room_scene(settings.width, settings.height)
     n = subdivisions_for(len(base.mesh.faces), triangles)
     mesh = subdivide_mesh(base.mesh, n)
     scene = Scene(mesh, base.maps, base.cameras)
@@ -543,21 +402,21 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     v = triangle_vertices(mesh.positions, mesh.faces)
 
     with PeakRSS() as rss:
-        bvh, wall, _ = _clock(build_bvh, *v)
-    walls = [wall] + [_clock(build_bvh, *v)[1] for _ in range(settings.bvh_repeats - 1)]
+        bvh, wall, _ = clock(build_bvh, *v)
+    walls = [wall] + [clock(build_bvh, *v)[1] for _ in range(settings.bvh_repeats - 1)]
     tracemalloc.start()
     before = tracemalloc.get_traced_memory()[0]
     build_bvh(*v)
     traced_peak = tracemalloc.get_traced_memory()[1] - before
     tracemalloc.stop()
 
-    host, pack_wall, _ = _clock(HostScene.pack, mesh, scene.maps, bvh)
+    host, pack_wall, _ = clock(HostScene.pack, mesh, scene.maps, bvh)
     arrays = {arg.name: getattr(host, arg.name) for arg in SCENE_ARGS if arg.buffer}
     total_bytes = sum(a.nbytes for a in arrays.values())
     geometry_bytes = sum(arrays[k].nbytes for k in GEOMETRY_ARGS)
     result = {
         "section": "bvh", "triangles": int(len(mesh.faces)), "subdivision": n,
-        "build_s": _median(walls), "build_runs": len(walls), "nodes": bvh.n_nodes, "sah_cost": bvh.sah_cost(),
+        "build_s": median(walls), "build_runs": len(walls), "nodes": bvh.n_nodes, "sah_cost": bvh.sah_cost(),
         "traced_peak_mb": traced_peak / 2**20, "rss_growth_mb": rss.growth / 2**20,
         "pack_rest_s": pack_wall, "emitters": int(host.num_emitters),
         "device_mb": total_bytes / 2**20, "geometry_bytes_per_tri": geometry_bytes / len(mesh.faces),
@@ -571,15 +430,15 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     for key, features in (("bare", bare), ("all", Features.everything(max_bounces=1))):
         runner = InvrenderRunner(scene, camera, features, device, host=host)
         runner.warm_up()
-        times = [_clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
-        rate = pixels * settings.throughput_spp / _median(times)
+        times = [clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
+        rate = pixels * settings.throughput_spp / median(times)
         result[f"invrender_{key}_samples_per_s"] = rate
         result[f"invrender_{key}_rays_per_s"] = 2 * rate
     if variant and settings.bvh_mitsuba:
         runner = MitsubaRunner(scene, camera, 1, variant)
         runner.warm_up()
-        times = [_clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
-        rate = pixels * settings.throughput_spp / _median(times)
+        times = [clock(runner.render, settings.throughput_spp)[1] for _ in range(settings.throughput_repeats)]
+        rate = pixels * settings.throughput_spp / median(times)
         result["mitsuba_load_s"] = runner.one_time["load_s"]
         result["mitsuba_samples_per_s"] = rate
         result["mitsuba_rays_per_s"] = 3 * rate  # camera ray, the emitter sample's shadow ray, the BSDF ray
@@ -617,7 +476,7 @@ def _interleaved(runners, spp, repeats, desc):
     out = {id(r): {"walls": [], "images": [], "variances": []} for r in runners}
     for rep in tqdm(range(repeats), desc=desc, unit="round", leave=False):
         for runner in (runners if rep % 2 == 0 else runners[::-1]):
-            result, wall, _ = _clock(runner.render_full, spp)
+            result, wall, _ = clock(runner.render_full, spp)
             out[id(runner)]["walls"].append(wall)
             out[id(runner)]["images"].append(result["radiance"].astype(np.float64))
             out[id(runner)]["variances"].append(result["variance"].astype(np.float64))
@@ -625,7 +484,7 @@ def _interleaved(runners, spp, repeats, desc):
     for runner in runners:
         o = out[id(runner)]
         means = [image.mean() for image in o["images"]]
-        stats.append({"wall": _median(o["walls"]), "image": np.mean(o["images"], 0),
+        stats.append({"wall": median(o["walls"]), "image": np.mean(o["images"], 0),
                       "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
                       "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
                       "var_per_sample": float(np.mean(o["variances"]) * spp)})
@@ -717,11 +576,11 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     mit.warm_up()
     walls, images = [], []
     for _ in tqdm(range(max(2, settings.profile_repeats)), desc="profile mitsuba", leave=False):
-        image, wall, _ = _clock(mit.render, settings.profile_spp)
+        image, wall, _ = clock(mit.render, settings.profile_spp)
         walls.append(wall)
         images.append(image.astype(np.float64))
     pair_var = np.mean([np.mean((images[k] - images[k + 1]) ** 2) / 2 for k in range(len(images) - 1)])
-    t = _median(walls) / (pixels * settings.profile_spp)
+    t = median(walls) / (pixels * settings.profile_spp)
     var = float(pair_var * settings.profile_spp)
     rows.append({
         "section": "profile", "case": f"mitsuba {variant} path", "renderer": "mitsuba", "bounces": bounces,
@@ -742,11 +601,11 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     walls = {id(r): [] for r in (*one, mit1)}
     for rep in tqdm(range(settings.profile_repeats), desc="one-bounce throughput", leave=False):
         for r in (*one, mit1) if rep % 2 == 0 else (mit1, *one[::-1]):
-            walls[id(r)].append(_clock(r.render, spp)[1])
+            walls[id(r)].append(clock(r.render, spp)[1])
     for name, r, rays in (("one bounce, Lambertian closest-hit only", one[0], 2),
                           ("one bounce, all features", one[1], 2),
                           (f"one bounce, mitsuba {variant} (max_depth 2)", mit1, 3)):
-        rate = pixels * spp / _median(walls[id(r)])
+        rate = pixels * spp / median(walls[id(r)])
         rows.append({"section": "profile", "case": name, "renderer": r.name, "bounces": 1,
                      "t_per_sample_us": 1e6 / rate, "rays_per_s": rays * rate, "samples_per_s": rate})
     return rows
@@ -792,108 +651,13 @@ TABLES = {
 }
 
 
-def _cell(value, fmt: str) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-" if value is None else str(value)
-    if fmt.endswith("%"):
-        return format(float(value), fmt)
-    if fmt == "d":
-        return str(int(value))
-    if fmt == "s":
-        return str(value)
-    return format(float(value), fmt)
-
-
-def format_table(title: str, columns, rows) -> str:
-    cells = [[header for _, header, _ in columns]]
-    cells += [[_cell(row.get(key), fmt) for key, _, fmt in columns] for row in rows]
-    widths = [max(len(r[k]) for r in cells) for k in range(len(columns))]
-    line = lambda r: "| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |"
-    sep = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
-    return "\n".join([f"### {title}", "", line(cells[0]), sep] + [line(r) for r in cells[1:]]) + "\n"
-
-
-def write_csv(path: Path, rows: list[dict]):
-    keys = []
-    for row in rows:
-        keys += [k for k in row if k not in keys]
-    with open(path, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=keys)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
-
-
-def plot(curves: list[dict], equal: list[dict], path: Path, xlabel: str = "wall time per image [s]",
-         ylabel: str = "RMSE vs reference", curves_csv: str = "render_curves.csv") -> str | None:
-    """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped.
-    Rows: curves with bounces, renderer, wall_s, rmse; equal with bounces, target_rmse."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return f"matplotlib is not installed: plot skipped (the curves are in {curves_csv})"
-    bounces = sorted({c["bounces"] for c in curves})
-    fig, axes = plt.subplots(1, len(bounces), figsize=(5 * len(bounces), 4), squeeze=False)
-    for ax, b in zip(axes[0], bounces):
-        for name, style in (("invrender", "o-"), ("mitsuba", "s--")):
-            pts = [c for c in curves if c["bounces"] == b and c["renderer"] == name]
-            ax.loglog([p["wall_s"] for p in pts], [p["rmse"] for p in pts], style, label=name)
-        target = [e for e in equal if e["bounces"] == b][0]["target_rmse"]
-        ax.axhline(target, color="grey", lw=0.8, ls=":")
-        ax.set_title(f"{b} bounces")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel(ylabel)
-        ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return None
-
-
-def machine_info(device=None) -> dict:
-    info = {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count()}
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["cpu"] = line.split(":", 1)[1].strip()
-                break
-        info["memory_gb"] = round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1)
-    except (OSError, ValueError):
-        pass
-    try:
-        from ..render.device import choose_device, describe
-
-        info["opencl_device"] = describe(choose_device(device))
-    except Exception as error:  # noqa: BLE001 - informational only
-        info["opencl_device"] = f"unknown ({error})"
-    try:
-        import drjit
-        import mitsuba
-
-        info["mitsuba"], info["drjit"] = mitsuba.__version__, drjit.__version__
-        info["DRJIT_LIBLLVM_PATH"] = os.environ.get("DRJIT_LIBLLVM_PATH")
-    except ImportError:
-        pass
-    info["numpy"] = np.__version__
-    try:
-        root = Path(__file__).resolve().parents[3]
-        info["git_commit"] = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-                                            capture_output=True, text=True).stdout.strip()
-    except OSError:
-        pass
-    return info
-
-
 # ---------------------------------------------------------------------------------------------
 # The benchmark
 # ---------------------------------------------------------------------------------------------
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
-    _quiet_pyopencl()
+    quiet_pyopencl()
     settings = QUICK if quick else FULL
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -907,7 +671,7 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     load_start = os.getloadavg()
     log.info("bench render (%s): Mitsuba %s, out %s", settings.mode, variant, out)
 
-    scene, _ = room_scene(settings)
+    scene, _ = room_scene(settings.width, settings.height)
     camera = scene.cameras[settings.view]
     results = {"equal_rmse": [], "curves": [], "one_time": []}
     for bounces in tqdm(settings.bounces, desc="equal RMSE", unit="B"):
@@ -945,22 +709,9 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     report = {"benchmark": "render", "mode": settings.mode, "mitsuba_variant": variant, "settings": asdict(settings),
               "machine": machine, "seconds": time.time() - started, "notes": notes, **results}
 
-    text = [f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
-            f"room view {settings.view}; {report['seconds']:.0f} s)", ""]
-    for key in ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"):
-        title, columns = TABLES[key]
-        text.append(format_table(title, columns, results[key]))
-    text.append("Machine: " + ", ".join(f"{k}={v}" for k, v in machine.items()))
-    for n in notes:
-        text.append(f"NOTE: {n}")
-    table = "\n".join(text) + "\n"
-
-    (out / "render.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
-    for key in ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"):
-        write_csv(out / f"render_{key}.csv", results[key])
-    (out / "render_table.md").write_text(table)
-    sys.stdout.write(table)
-    sys.stdout.flush()
+    title = (f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
+             f"room view {settings.view}; {report['seconds']:.0f} s)")
+    write_report(out, "render", title, report, TABLES, ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"))
     return report
 
 
@@ -979,7 +730,7 @@ def _main(argv=None) -> int:
     settings = QUICK if args.mode == "quick" else FULL
     settings = replace(settings, width=args.width or settings.width, height=args.height or settings.height,
                        bvh_mitsuba=settings.bvh_mitsuba and not args.no_mitsuba)
-    _quiet_pyopencl()
+    quiet_pyopencl()
     result = bvh_probe(args.triangles, settings, args.device, args.variant)
     print(PROBE_MARK + json.dumps(result), flush=True)
     return 0

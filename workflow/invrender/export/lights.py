@@ -17,7 +17,7 @@ lat = pi / 2 - pi i / (H - 1): +Y up, the image centre looking along +Z, a quart
 along +X, the left and right edges along -Z. It is kg resampled area-weighted (scene/cubemap.py),
 so other tools get kg's total light; the exact cube goes beside it (`invrender:cube`), for the
 importer while the texture is still the one the export wrote. Mitsuba's `envmap`
-(render/mitsuba_bridge.py) has the same orientation and rows but places column j at (j + 1/2) / W.
+(invrender/mitsuba/envmap.py) has the same orientation and rows but places column j at (j + 1/2) / W.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""The Mitsuba 3 bridge: each test checks one convention against a number known independently
-(a closed form, a projection, a direction, a formula), so a wrong sign or flip fails loudly."""
+"""The Mitsuba 3 bridge (invrender/mitsuba/): each test checks one convention against a number known
+independently (a closed form, a projection, a direction, a formula, the kernel), so a wrong sign or
+flip fails loudly."""
 
 from __future__ import annotations
 
@@ -7,11 +8,12 @@ import numpy as np
 import pytest
 
 # The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
-import invrender.render.mitsuba_bridge as mb  # isort: skip
-import drjit as dr  # noqa: E402
-import mitsuba as mi  # noqa: E402
-from invrender.scene.cubemap import cube_to_direction, direction_to_cube, lookup_cube  # noqa: E402
-from invrender.scene.types import Camera, Maps, Mesh, Scene  # noqa: E402
+import invrender.mitsuba as mb  # noqa: I001
+import drjit as dr
+import mitsuba as mi
+from invrender.scene.cubemap import cube_to_direction, direction_to_cube, lookup_cube
+from invrender.scene.regions import classify_faces
+from invrender.scene.types import Camera, Maps, Mesh, Scene
 
 LLVM = "llvm_ad_rgb"
 SCALAR = "scalar_rgb"
@@ -322,10 +324,10 @@ def _reference_bsdf_cos(wo, wi, kd, ks, ka):
     return np.where(((ci > 0) & (co > 0))[:, None], val * ci[:, None], 0.0)
 
 
-def _bsdf_and_si(variant, kd, ks, ka, wo):
+def _bsdf_and_si(variant, kd, ks, ka, wo, plugin="milo"):
     """The plugin and, in a JIT variant, one SurfaceInteraction per viewer direction wo."""
     mb.set_variant(variant)
-    bsdf = mi.load_dict(mb.milo_bsdf(kd, ks, ka))
+    bsdf = mi.load_dict(mb.milo_bsdf(kd, ks, ka) | {"type": plugin})
     if variant == SCALAR:
         return bsdf, None
     si = dr.zeros(mi.SurfaceInteraction3f, len(wo))
@@ -413,18 +415,105 @@ def test_milo_sampling_chi2(wo):
     assert chi2.run(), chi2.messages
 
 
-@pytest.mark.skipif(LLVM not in VARIANTS, reason="vectorised evaluation")
-def test_ks_zero_is_exactly_lambertian_at_grazing_angles():
+def _eval_pdf_rows(variant, kd, ks, ka, wo, wi, plugin="milo"):
+    """The plugin's (f ci (N, 3), pdf (N,)) for viewer directions wo and light directions wi."""
+    bsdf, si = _bsdf_and_si(variant, kd, ks, ka, wo, plugin)
+    ctx = mi.BSDFContext()
+    if variant == LLVM:
+        value, pdf = bsdf.eval_pdf(ctx, si, mi.Vector3f(*(np.asarray(wi, np.float32).T)))
+        return _rows(value, len(wo)), _rows(pdf, len(wo))[:, 0]
+    rows = []
+    for a, b in zip(wo, wi):
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.wi = mi.Vector3f(*(float(c) for c in a))
+        si.uv = mi.Point2f(0.5, 0.5)
+        value, pdf = bsdf.eval_pdf(ctx, si, mi.Vector3f(*(float(c) for c in b)))
+        rows.append((np.ravel(np.array(value)), float(pdf)))
+    return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+
+
+@pytest.mark.parametrize("variant", BOTH)
+def test_ks_zero_is_exactly_lambertian_at_grazing_angles(variant):
     # Without the F90 clamp, ks = 0 would still reflect (1 - wi.h)^5 near the mirror direction.
     rng = np.random.default_rng(5)
-    count = 500
+    count = 500 if variant == LLVM else 60
     wo = np.tile([np.sin(1.48), 0.0, np.cos(1.48)], (count, 1))  # 85 degrees
     wi = wo * np.array([-1.0, -1.0, 1.0]) + 0.1 * rng.normal(size=(count, 3))
     wi[:, 2] = np.abs(wi[:, 2])
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
-    bsdf, si = _bsdf_and_si(LLVM, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), 0.1, wo)
-    got = _rows(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(wi.astype(np.float32).T))), count)
+    got, _ = _eval_pdf_rows(variant, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), 0.1, wo, wi)
     assert np.allclose(got, wi[:, 2:3] / np.pi, rtol=1e-5, atol=1e-7)
+
+
+def _unit(*v):
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v)
+
+
+# (viewer wo, light wi): the degenerate cases the kernel handles one by one (kernels/bsdf.h), and
+# ordinary ones so that the comparison is not all zeros.
+DEGENERATE = {
+    "n.h = 0, light below": (_unit(0.6, 0.0, 0.8), _unit(0.6, 0.0, -0.8)),
+    "n.h = 0, both in the tangent plane": (_unit(1.0, 0.0, 0.0), _unit(0.0, 1.0, 0.0)),
+    "wi = -wo: no half vector": (_unit(0.6, 0.0, 0.8), _unit(-0.6, 0.0, -0.8)),
+    "light in the tangent plane": (_unit(0.6, 0.0, 0.8), _unit(-1.0, 0.0, 0.0)),
+    "viewer in the tangent plane": (_unit(1.0, 0.0, 0.0), _unit(-0.6, 0.0, 0.8)),
+    "light grazing, 1e-6 above": (_unit(0.6, 0.0, 0.8), _unit(-1.0, 0.0, 1e-6)),
+    "mirror, below the surface": (_unit(0.3, -0.2, -0.9), _unit(-0.3, 0.2, -0.9)),
+    "mirror": (_unit(0.3, -0.2, 0.9), _unit(-0.3, 0.2, 0.9)),
+    "off the mirror": (_unit(0.5, 0.1, 0.7), _unit(-0.2, 0.3, 0.8)),
+}
+
+
+@pytest.mark.parametrize("variant", BOTH)
+def test_milo_at_degenerate_directions_matches_the_kernel(variant):
+    # scalar_rgb runs the plugin on Python floats, where 0 / 0 raises: at n.h = 0 it must give
+    # what the kernel gives (its specular term is 0 there), in value and in pdf.
+    from probe import KernelProbe
+
+    kd, ks, ka = np.array([0.5, 0.4, 0.3]), np.array([0.3, 0.2, 0.1]), 0.3
+    wo = np.array([v for v, _ in DEGENERATE.values()])
+    wi = np.array([l for _, l in DEGENERATE.values()])
+    count = len(wo)
+    n = np.array([0.0, 0.0, 1.0]) * np.where(wo[:, 2] < 0, -1.0, 1.0)[:, None]  # the kernel's n is on wo's side
+    f, pdf_cos, pdf_spec = KernelProbe().bsdf(n, wo, wi, np.tile(kd, (count, 1)), np.tile(ks, (count, 1)),
+                                              np.full(count, ka))
+    luminance = lambda c: c @ np.array([0.212671, 0.715160, 0.072169])  # mi.luminance
+    p_spec = luminance(ks) / (luminance(kd) + luminance(ks))
+    ci = np.sum(n * wi, 1)
+    # the kernel's pdf_cosine is ci / pi without looking at wo; the plugin's pdf is 0 where co = 0
+    pdf = np.where(ci > 0, (1 - p_spec) * pdf_cos + p_spec * pdf_spec, 0.0) * (np.abs(wo[:, 2]) > 0)
+    got, got_pdf = _eval_pdf_rows(variant, kd, ks, ka, wo, wi)
+    assert np.all(np.isfinite(got)) and np.all(np.isfinite(got_pdf))
+    assert np.count_nonzero(f.any(1)) == 4, f  # the grazing light and the three ordinary cases
+    for k, name in enumerate(DEGENERATE):
+        assert np.allclose(got[k], f[k], rtol=1e-4, atol=1e-6), (name, got[k], f[k])
+        assert np.isclose(got_pdf[k], pdf[k], rtol=1e-4, atol=1e-6), (name, got_pdf[k], pdf[k])
+
+
+@pytest.mark.parametrize("variant", BOTH)
+def test_usd_preview_lobe_is_ggx_smith_sampled_as_milo(variant):
+    # bench export's `usd_preview_lobe`: UsdPreviewSurface's GGX D and separable Smith G at
+    # alpha^2 = ka, written out here from Walter et al. 2007 (Eqs. 33, 34); milo's pdf.
+    rng = np.random.default_rng(8)
+    count = 2000 if variant == LLVM else 80
+    kd, ks, ka = np.array([0.3, 0.5, 0.7]), np.array([0.04, 0.5, 0.9]), 0.08
+    wo = _random_directions(rng, count)
+    mirror = wo * np.array([-1.0, -1.0, 1.0]) + 0.2 * rng.normal(size=(count, 3))
+    wi = mirror / np.linalg.norm(mirror, axis=1, keepdims=True)
+    n = np.array([0.0, 0.0, 1.0]) * np.where(wo[:, 2] < 0, -1.0, 1.0)[:, None]
+    ci, co = np.sum(n * wi, 1), np.sum(n * wo, 1)
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=1, keepdims=True)
+    c2, wih = np.sum(n * h, 1) ** 2, np.sum(wi * h, 1)
+    d = ka / (np.pi * (c2 * (ka - 1) + 1) ** 2)
+    g1 = lambda c: 2 / (1 + np.sqrt(1 + ka * (1 - c**2) / np.maximum(c, 1e-12) ** 2))
+    f = ks + (np.minimum(1, 50 * ks) - ks) * np.clip(1 - wih, 0, 1)[:, None] ** 5
+    value = kd * ci[:, None] / np.pi + f * (d * g1(ci) * g1(co) / (4 * np.maximum(co, 1e-12)))[:, None]
+    expected = np.where(((ci > 0) & (co > 0))[:, None], value, 0.0)
+    assert (expected > 0).any(1).mean() > 0.3
+    got, pdf = _eval_pdf_rows(variant, kd, ks, ka, wo, wi, plugin="usd_preview_lobe")
+    assert np.allclose(got, expected, rtol=2e-4, atol=1e-5)
+    assert np.allclose(pdf, _eval_pdf_rows(variant, kd, ks, ka, wo, wi)[1], rtol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -474,14 +563,29 @@ def test_classify_faces_by_the_texels_under_them():
                     [0.80, 0.20], [0.95, 0.20], [0.95, 0.05],  # over the emitting texel (v up)
                     [0.60, 0.90], [0.95, 0.90], [0.60, 0.70]], np.float32)
     mesh = Mesh(np.random.default_rng(0).normal(size=(12, 3)).astype(np.float32), np.arange(12, dtype=np.int32).reshape(4, 3), uvs)
-    groups = mb.classify_faces(Scene(mesh, maps))
+    groups = classify_faces(Scene(mesh, maps))
     assert groups["hole"].tolist() == [True, False, False, False]
     assert groups["window_dropped"].tolist() == [False, True, False, False]
     assert groups["emitter"].tolist() == [False, False, True, False]
-    assert not mb.classify_faces(Scene(mesh, maps), window_as_hole=False)["hole"].any()
+    assert not classify_faces(Scene(mesh, maps), window_as_hole=False)["hole"].any()
     camera = look_at_camera([0, 0, 5], [0, 0, 0], width=4, height=4)
     with pytest.warns(UserWarning, match="1 faces kept"):
         mb.scene_to_mitsuba(Scene(mesh, maps), camera, 1, 1, variant=VARIANTS[0])
+
+
+def test_lambertian_faces_keep_a_texel_of_margin_from_glossy_texels():
+    # an 8 x 8 atlas, one glossy texel at (row 2, column 5): v up, so it spans u in [5/8, 6/8),
+    # v in (5/8, 6/8]
+    maps = Maps.uniform(size=(8, 8), kd=0.5, ks=0.0)
+    maps.ks[2, 5] = 0.3
+    t = 1 / 8
+    uvs = np.array([[5.2 * t, 5.2 * t], [5.8 * t, 5.2 * t], [5.2 * t, 5.8 * t],  # on the glossy texel
+                    [6.2 * t, 5.2 * t], [6.8 * t, 5.2 * t], [6.2 * t, 5.8 * t],  # its neighbour: the margin
+                    [1.2 * t, 1.2 * t], [2.8 * t, 1.2 * t], [1.2 * t, 2.8 * t]], np.float32)  # far away
+    mesh = Mesh(np.random.default_rng(0).normal(size=(9, 3)).astype(np.float32), np.arange(9, dtype=np.int32).reshape(3, 3), uvs)
+    assert mb.lambertian_faces(Scene(mesh, maps)).tolist() == [False, False, True]
+    maps.ks[:] = 0.0
+    assert mb.lambertian_faces(Scene(mesh, maps)).all()
 
 
 @pytest.mark.parametrize("variant", VARIANTS)
