@@ -32,6 +32,11 @@ from ..scene.types import Atlas, Mesh, SceneError, SceneObject
 log = logging.getLogger(__name__)
 
 CONSTANT_ATLAS = (1, 1)  # a material without textures is one texel
+# A baked atlas's texels per texture texel (along each axis): the atlas grid is not aligned with
+# the texture's, so nearest-texel baking moves the texture's edges by up to half an atlas texel;
+# at 4 that is an eighth of a texture texel (measured against Mitsuba reading the texture itself,
+# tests/import_/test_import_mitsuba.py).
+OVERSAMPLE = 4.0
 
 
 def run(source, out_dir, cameras=None, environment=None, cube_size: int = 64, emission_sides: str = "one",
@@ -179,11 +184,11 @@ def baked_atlas(object_name: str, mesh: Mesh, material: MtlMaterial, max_atlas: 
 
 def texture_density(mesh: Mesh, material: MtlMaterial) -> float:
     """Texels per meter at which the baked atlas keeps the tiled texture's detail: the
-    texture's own density on the surface (its texels over the UV area, per 3D area), twice over
-    so that nearest-texel resampling loses little."""
+    texture's own density on the surface (its texels over the UV area, per 3D area), OVERSAMPLE
+    times over."""
     texels = max(image.shape[0] * image.shape[1] for image in map(material.image, material.maps))
     corners_uv = np.asarray(mesh.uvs, np.float64)[mesh.faces]
     e1, e2 = corners_uv[:, 1] - corners_uv[:, 0], corners_uv[:, 2] - corners_uv[:, 0]
     uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
-    return 2.0 * float(np.sqrt(texels * uv_area / triangle_areas(mesh.positions, mesh.faces).sum()))
+    return OVERSAMPLE * float(np.sqrt(texels * uv_area / triangle_areas(mesh.positions, mesh.faces).sum()))
 
