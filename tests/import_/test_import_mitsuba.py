@@ -72,7 +72,7 @@ def test_an_imported_room_renders_like_mitsuba_rendering_its_files(tmp_path):
                  "--cube-size", "32"]) == 0
     assert main(["render", str(scene_dir), "--out", str(renders), "--spp", str(SPP), "--seed", "3",
                  "--max-bounces", str(BOUNCES)]) == 0
-    ours, our_var = read_image(renders / "view.exr"), read_image(renders / "view_variance.exr")
+    ours, our_var = read_image(renders / "view.exr"), read_image(renders / "aovs" / "view_variance.exr")
     theirs = [np.array(mi.render(mi.load_dict(mitsuba_scene(files, seed), parallel=False)))[..., :3]
               for seed in (1, 2)]
     mitsuba = 0.5 * (theirs[0] + theirs[1])

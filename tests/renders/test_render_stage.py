@@ -45,7 +45,7 @@ def test_variance_beside_each_view_predicts_the_spread_between_two_seeds(scene_d
     for seed in (1, 2):
         out = tmp_path / f"seed{seed}"
         assert main(["render", str(scene_dir), "--out", str(out), "--spp", "8", "--seed", str(seed)]) == 0
-        renders.append((read_image(out / "view.exr"), read_image(out / "view_variance.exr")))
+        renders.append((read_image(out / "view.exr"), read_image(out / "aovs" / "view_variance.exr")))
     (a, var_a), (b, var_b) = renders
     assert var_a.shape == a.shape and np.all(var_a >= 0) and var_a.max() > 0
     ratio = ((a - b) ** 2).mean() / (var_a + var_b).mean()

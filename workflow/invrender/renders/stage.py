@@ -36,10 +36,10 @@ def decide_features(scene, features_path=None, max_bounces: int | None = None, o
 
 def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, device=None, progress=True,
         max_bounces: int | None = None, overrides: dict | None = None) -> Features:
-    """Render the scene's cameras (or those named) to out_dir/<camera>.exr + .png preview, the
-    variance of each pixel's mean to out_dir/<camera>_variance.exr (the Monte Carlo error bar of
-    the image: its square root is the standard error), and the AOVs to
-    out_dir/aovs/<camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical axis
+    """Render the scene's cameras (or those named) to out_dir/<camera>.exr + .png preview (the
+    top level holds only views, so a glob finds them), and beside them in out_dir/aovs/ the
+    variance of each pixel's mean, <camera>_variance.exr (the Monte Carlo error bar of the image:
+    its square root is the standard error), and <camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical axis
     (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1 (0 =
     miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
     scene = load_scene(scene_dir)
@@ -62,8 +62,8 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
 def write_view(out_dir: Path, stem: str, out: dict) -> None:
     write_exr(out_dir / f"{stem}.exr", out["radiance"])
     write_png_preview(out_dir / f"{stem}.png", out["radiance"])
-    write_exr(out_dir / f"{stem}_variance.exr", out["variance"])
     aovs = out_dir / "aovs"
+    write_exr(aovs / f"{stem}_variance.exr", out["variance"])
     write_exr(aovs / f"{stem}_depth.exr", out["depth"])
     write_exr(aovs / f"{stem}_normal.exr", out["normal"])
     write_exr(aovs / f"{stem}_uv.exr", np.dstack([out["uv"], np.zeros_like(out["depth"])]))
