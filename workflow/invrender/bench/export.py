@@ -35,7 +35,7 @@ from ..scene.format import load_scene, write_scene
 from ..scene.regions import classify_faces
 from ..scene.types import Maps, Scene
 from ..synthesize import make_duplicates, make_room
-from .harness import choose_variant, machine_info, quiet_pyopencl, write_report
+from .harness import start_run, machine_info, write_report
 
 log = logging.getLogger("invrender.bench")
 
@@ -175,19 +175,8 @@ TABLES = {
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
     """The three tables; `device` is not used (our renders take the default device)."""
-    quiet_pyopencl()
-    settings = QUICK if quick else FULL
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    notes = []
-    variant, why = choose_variant()
-    if variant != "llvm_ad_rgb":
-        settings = scalar_settings(settings)
-        notes.append(why)
-        log.warning("%s", why)
-    started = time.time()
-    load_start = os.getloadavg()
-    log.info("bench export (%s): Mitsuba %s, out %s", settings.mode, variant, out)
+    settings, out, variant, notes, started, load_start = start_run("export", QUICK if quick else FULL, out,
+                                                                    scalar_settings)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         results = {"round_trip": round_trips(root, settings.spp, dict(settings.room_config))}

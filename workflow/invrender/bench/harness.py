@@ -16,10 +16,14 @@ import subprocess
 import sys
 import threading
 import time
+import logging
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
+
+log = logging.getLogger("invrender.bench")
 
 VARIANT_ENV = "INVRENDER_BENCH_MITSUBA_VARIANT"  # force a Mitsuba variant (e.g. scalar_rgb)
 MIN_SPP_TO_JUDGE = 1000  # fewer samples per pixel: no verdict on whether two images agree
@@ -127,6 +131,34 @@ def choose_variant() -> tuple[str, str | None]:
         "Mitsuba's llvm_ad_rgb variant is unavailable (no libLLVM >= 16 found; Debian: apt-get install "
         "libllvm19, or set DRJIT_LIBLLVM_PATH). Comparing against scalar_rgb instead, a much weaker peer "
         "(one lane, the Python milo BSDF called per sample), at a reduced image size and ladder.")
+
+
+class RunStart(NamedTuple):
+    """What every benchmark run starts from (`start_run`)."""
+
+    settings: object
+    out: Path
+    variant: str
+    notes: list
+    started: float
+    load_start: tuple
+
+
+def start_run(name: str, settings, out, scalar_settings) -> RunStart:
+    """The start every benchmark shares: pyopencl quiet, the output folder made, the Mitsuba
+    variant chosen (settings scaled down by `scalar_settings` for anything but llvm_ad_rgb, and
+    why in the notes), the wall clock and the load average noted."""
+    quiet_pyopencl()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    notes = []
+    variant, why = choose_variant()
+    if variant != "llvm_ad_rgb":
+        settings = scalar_settings(settings)
+        notes.append(why)
+        log.warning("%s", why)
+    log.info("bench %s (%s): Mitsuba %s, out %s", name, settings.mode, variant, out)
+    return RunStart(settings, out, variant, notes, time.time(), os.getloadavg())
 
 
 # ---------------------------------------------------------------------------------------------

@@ -47,12 +47,11 @@ import sys
 import time
 import warnings
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from .harness import (PeakRSS, clock, choose_variant, fit_model, machine_info, median, model_time,
+from .harness import (start_run, PeakRSS, clock, fit_model, machine_info, median, model_time,
                       next_seed_block, plot, quiet_pyopencl, room_scene, time_at_rmse, verdict, write_report)
 
 log = logging.getLogger("invrender.bench")
@@ -657,19 +656,8 @@ TABLES = {
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
-    quiet_pyopencl()
-    settings = QUICK if quick else FULL
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    notes = []
-    variant, why = choose_variant()
-    if variant != "llvm_ad_rgb":
-        settings = scalar_settings(settings)
-        notes.append(why)
-        log.warning("%s", why)
-    started = time.time()
-    load_start = os.getloadavg()
-    log.info("bench render (%s): Mitsuba %s, out %s", settings.mode, variant, out)
+    settings, out, variant, notes, started, load_start = start_run("render", QUICK if quick else FULL, out,
+                                                                    scalar_settings)
 
     scene, _ = room_scene(settings.width, settings.height)
     camera = scene.cameras[settings.view]
