@@ -58,6 +58,19 @@ def test_changing_render_spp_reruns_render_only(complete, tmp_path):
     assert job_counts(result.stdout) == {"render": 2, "all": 1}
 
 
+def test_unknown_device_keeps_the_built_capture(complete):
+    """Issue 10, defect 7, as reported: on a built demo `--config device=NoSuchGPU` re-ran
+    synthesize (its params changed), whose job failed after snakemake had deleted the capture.
+    Now it stops before any job, and the capture is the one that was built."""
+    capture = complete / "results" / "room" / "capture"
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in sorted(capture.rglob("*")) if p.is_file()}
+    result = snakemake(complete, "--cores", "1", "--config", "device=NoSuchGPU", check=False)
+    assert result.returncode != 0
+    assert "config: device: no OpenCL device matches 'NoSuchGPU'; available: " in result.stdout, result.stdout
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in sorted(capture.rglob("*")) if p.is_file()} == before
+    assert job_counts(snakemake(complete, "-n").stdout) == {}
+
+
 def test_report_shows_the_renders(complete):
     report = complete / "report.html"
     snakemake(complete, "--report", report)

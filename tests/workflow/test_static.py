@@ -115,29 +115,73 @@ def test_config_readme_generator_rejects_a_template_without_its_tables(tmp_path)
 
 
 BAD_CONFIGS = {
-    "typo in a section": ({"geometry": {"target_face": 1000}}, ["target_face"]),
-    "typo at the top": ({"render": {"spp": 4}, "scene": {}}, ["'scene' was unexpected"]),
-    "typo in a scene": ({"scenes": {"room": {"synthetic": {"kind": "room", "sed": 3}}}}, ["sed"]),
+    "typo in a section": (
+        {"geometry": {"target_face": 1000}},
+        ["config: geometry.target_face: unknown key; allowed: target_faces, atlas_resolution, texels_per_meter, "
+         "padding, poisson_depth"],
+    ),
+    "typo at the top": (
+        {"render": {"spp": 4}, "scene": {}},
+        ["config: scene: unknown key; allowed: device, scenes, geometry, features, gradients, render, export"],
+    ),
+    "typo in a scene": (
+        {"scenes": {"room": {"synthetic": {"kind": "room", "sed": 3}}}},
+        ["config: scenes.room.synthetic.sed: unknown key; allowed: kind, spp, seed, config"],
+    ),
     "typo in a generator override": (
         {"scenes": {"room": {"synthetic": {"kind": "room", "config": {"camras": {}}}}}},
         ["scenes.room.synthetic.config", "camras"],
     ),
-    "wrong type": ({"render": {"spp": "many"}}, ["spp", "'many' is not of type 'integer'"]),
-    "unknown kind": ({"scenes": {"room": {"synthetic": {"kind": "castle"}}}}, ["castle"]),
+    "generator override of the wrong type": (
+        {"scenes": {"room": {"synthetic": {"kind": "room", "config": {"cameras": {"count": "six"}}}}}},
+        ["config: scenes.room.synthetic.config.cameras.count: 'six' is not of type 'integer'"],
+    ),
+    "generator vector of the wrong length": (
+        {"scenes": {"room": {"synthetic": {"kind": "room", "config": {"size": [4.0, 2.6]}}}}},
+        ["config: scenes.room.synthetic.config.size: [4.0, 2.6] is too short"],
+    ),
+    "wrong type": ({"render": {"spp": "many"}}, ["config: render.spp: 'many' is not of type 'integer'"]),
+    "out of range": ({"render": {"spp": 0}}, ["config: render.spp: 0 is less than the minimum of 1"]),
+    "unknown kind": (
+        {"scenes": {"room": {"synthetic": {"kind": "castle"}}}},
+        ["config: scenes.room.synthetic.kind: 'castle' is not allowed; allowed: room, duplicates"],
+    ),
     "missing capture": (
         {"scenes": {"kitchen": {"capture": {"path": "no/such/capture"}}}},
         ["'kitchen'", "scenes.kitchen.capture.path", "no/such/capture"],
     ),
-    "unknown mode": ({"scenes": {"room": {"mode": "panorama", "synthetic": {"kind": "room"}}}}, ["panorama"]),
+    "unknown mode": (
+        {"scenes": {"room": {"mode": "panorama", "synthetic": {"kind": "room"}}}},
+        ["config: scenes.room.mode: 'panorama' is not allowed; allowed: multiview, duplicates, room"],
+    ),
     "mode against the generator's kind": (
         {"scenes": {"cans": {"mode": "room", "synthetic": {"kind": "duplicates"}}}},
         ["'cans'", "scenes.cans.mode", "'room'", "'duplicates'"],
     ),
     "synthetic and capture at once": (
         {"scenes": {"room": {"synthetic": {"kind": "room"}, "capture": {"path": "."}}}},
-        ["is valid under each of"],
+        ["config: scenes.room: give one of synthetic or capture (got synthetic and capture)"],
     ),
+    "bounds in the wrong order": (
+        {"features": {"min_bounces": 5, "max_bounces": 3}},
+        ["config: features.min_bounces: 5 is more than features.max_bounces (3)"],
+    ),
+    "contradictory feature overrides": (
+        {"features": {"overrides": {"window": True, "environment": False}}},
+        ["config: features.overrides: window needs environment"],
+    ),
+    "no such device": ({"device": "NoSuchGPU"}, ["config: device: no OpenCL device matches 'NoSuchGPU'; available: "]),
 }
+
+
+def assert_one_message(output: str, expected: list[str]):
+    """The output is snakemake's header, the one-line message and the lines snakemake adds
+    saying where in common.smk it was raised: a few lines, and nothing of the schema."""
+    for text in expected:
+        assert text in output, output[-3000:]
+    lines = output.strip().splitlines()
+    assert len(lines) <= 5, output[-3000:]
+    assert "description" not in output and "Failed validating" not in output, output[-3000:]
 
 
 @pytest.mark.parametrize("name", BAD_CONFIGS)
@@ -147,9 +191,48 @@ def test_bad_config_stops_before_any_job(tmp_path, name):
     config.write_text(yaml.safe_dump(override))
     result = snakemake(tmp_path, "--cores", "1", config=[TEST_CONFIG, config], check=False)
     assert result.returncode != 0
-    for text in expected:
-        assert text in result.stdout, result.stdout[-3000:]
+    assert_one_message(result.stdout, expected)
     assert not (tmp_path / "results").exists()  # no job ran
+
+
+def test_typo_on_the_command_line_is_one_message(tmp_path):
+    """Issue 10, defect 10: a typo'd key was named, then followed by some 50 lines of schema."""
+    result = snakemake(tmp_path, "-n", "--config", "scenes={room: {synthetic: {kind: room, sed: 3}}}", check=False)
+    assert result.returncode != 0
+    assert_one_message(result.stdout, ["config: scenes.room.synthetic.sed: unknown key; allowed: kind, spp, seed"])
+
+
+def _tree(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("dry_run", [True, False])
+def test_unknown_device_stops_before_any_job_and_keeps_previous_outputs(tmp_path, dry_run):
+    """Issue 10, defect 7: `--config device=NoSuchGPU` passed the checks, and the synthesize job
+    it re-ran failed with a traceback after snakemake had deleted the good capture. The message
+    lists the devices render/device.py sees."""
+    from invrender.render.device import all_devices, describe
+
+    capture = tmp_path / "results" / "room" / "capture"
+    (capture / "images").mkdir(parents=True)
+    (capture / "images" / "view_000.png").write_bytes(b"a previous output")
+    before = _tree(tmp_path / "results")
+    args = ["-n"] if dry_run else ["--cores", "1"]
+    result = snakemake(tmp_path, *args, "--config", "device=NoSuchGPU", check=False)
+    assert result.returncode != 0
+    listing = "; ".join(describe(d) for d in all_devices())
+    assert_one_message(result.stdout, [f"config: device: no OpenCL device matches 'NoSuchGPU'; available: {listing}"])
+    assert _tree(tmp_path / "results") == before
+
+
+def test_device_from_the_environment_is_checked_and_a_present_one_passes(tmp_path):
+    from invrender.render.device import all_devices
+
+    result = snakemake(tmp_path, "-n", check=False, env={"INVRENDER_DEVICE": "NoSuchGPU"})
+    assert result.returncode != 0
+    assert_one_message(result.stdout, ["config: $INVRENDER_DEVICE (config device is null): no OpenCL device matches"])
+    present = all_devices()[0].name.split()[0]  # "pthread-AMD": a plain YAML string
+    assert job_counts(snakemake(tmp_path, "-n", "--config", f"device={present}").stdout)["synthesize"] == 2
 
 
 def test_capture_without_cameras_is_named(tmp_path):

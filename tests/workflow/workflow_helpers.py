@@ -27,16 +27,17 @@ def snakemake_env() -> dict:
     return env
 
 
-def snakemake(workdir, *args, config=TEST_CONFIG, check=True, timeout=600, **popen):
+def snakemake(workdir, *args, config=TEST_CONFIG, check=True, timeout=600, env=None, **popen):
     """Run snakemake on the repository's Snakefile in ``workdir``; returns the CompletedProcess
     (stdout and stderr together in .stdout). ``config=None`` uses only the Snakefile's
-    configfile (the default demo config, which must then exist in ``workdir``)."""
+    configfile (the default demo config, which must then exist in ``workdir``); ``env`` adds
+    variables to the environment."""
     cmd = [sys.executable, "-m", "snakemake", "-s", str(SNAKEFILE), "--directory", str(workdir)]
     if config is not None:
         cmd += ["--configfile", *map(str, [config] if isinstance(config, (str, Path)) else config)]
     cmd += [str(a) for a in args]
     result = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=snakemake_env(), timeout=timeout, **popen)
+                            env={**snakemake_env(), **(env or {})}, timeout=timeout, **popen)
     if check and result.returncode != 0:
         raise AssertionError(f"snakemake {' '.join(cmd[6:])} failed ({result.returncode}):\n{result.stdout[-6000:]}")
     return result

@@ -3,17 +3,22 @@
 The config is validated against workflow/schemas/config.schema.yaml (defaults filled in), then
 each scene's mode is settled and checked against the file system: a capture that lacks what its
 mode needs, or names a file that is not there, stops the workflow here, before any job runs,
-with one message naming the scene, the key and the path.
+with one message naming the scene, the key and the path. So do what the schema cannot say (a
+generator override of the wrong type, min_bounces above max_bounces, contradictory feature
+overrides) and an OpenCL device that is not there: a job that fails on its config has had its
+previous outputs deleted already.
 """
 
 import json
 import os
 import re
+import reprlib
 import shlex
 import shutil
 import sys
 from pathlib import Path
 
+import jsonschema
 import yaml
 
 from snakemake.exceptions import WorkflowError
@@ -43,6 +48,8 @@ def coerce_strings(value, schema):
             if subschema:
                 value[key] = coerce_strings(item, subschema)
         return value
+    if isinstance(value, list) and isinstance(schema.get("items"), dict):
+        return [coerce_strings(item, schema["items"]) for item in value]
     types = schema.get("type", [])
     types = [types] if isinstance(types, str) else types
     if isinstance(value, str) and any(t in _SCALARS for t in types):
@@ -55,10 +62,73 @@ def coerce_strings(value, schema):
     return value
 
 
+# ---------------------------------------------------------------------------- schema errors
+
+# A value quoted in a message: its start. (Repr's keywords need Python 3.12.)
+_SHORT = reprlib.Repr()
+_SHORT.maxstring = _SHORT.maxother = 40
+_SHORT.maxdict = _SHORT.maxlist = 4
+_SHORT.maxlevel = 2
+
+
+def _schema_problem(error):
+    """(key below the error's path or None, what is wrong and what is allowed) of a
+    jsonschema error, in a few words: never the schema itself, which jsonschema prints whole.
+    """
+    value, instance, schema = error.validator_value, error.instance, error.schema
+    if error.validator == "additionalProperties":
+        allowed = list(schema.get("properties", {}))
+        extra = [key for key in instance if key not in allowed]
+        listing = f"allowed: {', '.join(allowed)}"
+        if len(extra) == 1:
+            return extra[0], f"unknown key; {listing}"
+        return None, f"unknown keys {', '.join(map(str, extra))}; {listing}"
+    if error.validator == "required":
+        missing = [key for key in value if key not in instance]
+        return missing[0], "required, but not given"
+    if error.validator == "enum":
+        allowed = ", ".join(map(str, value))
+        return None, f"{instance!r} is not allowed; allowed: {allowed}"
+    if error.validator == "oneOf" and all(list(b) == ["required"] for b in value):
+        keys = [key for branch in value for key in branch["required"]]
+        present = [key for key in keys if key in instance] or ["neither"]
+        return None, f"give one of {' or '.join(keys)} (got {' and '.join(present)})"
+    if error.validator == "type":
+        types = [value] if isinstance(value, str) else value
+        expected = " or ".join(map(repr, types))
+        return None, f"{_SHORT.repr(instance)} is not of type {expected}"
+    message = error.message
+    if len(message) > 160 or "\n" in message:
+        message = (
+            f"{_SHORT.repr(instance)} fails {error.validator}: {_SHORT.repr(value)}"
+        )
+    return None, message
+
+
+def schema_message(error, where=()):
+    """One line for a jsonschema error: 'config: <key path>: <what is wrong>; allowed: ...'."""
+    key, problem = _schema_problem(error)
+    path = [*where, *map(str, error.absolute_path), *([key] if key else [])]
+    return f"config: {'.'.join(path) or '(top level)'}: {problem}"
+
+
+def validate_config():
+    """snakemake's validate (it fills in the defaults), its error as one line. Its own message
+    carries the failing subschema whole, some 50 lines for a typo; the jsonschema error it
+    wraps is the WorkflowError's __context__."""
+    try:
+        validate(config, schema=SCHEMA)
+    except WorkflowError as error:
+        cause = error.__context__
+        if not isinstance(cause, jsonschema.ValidationError):
+            raise
+        raise WorkflowError(schema_message(cause)) from None
+
+
 with open(workflow.source_path(SCHEMA)) as _schema:
     CONFIG_SCHEMA = yaml.safe_load(_schema)
 coerce_strings(config, CONFIG_SCHEMA)
-validate(config, schema=SCHEMA)
+validate_config()
 
 # `.venv/bin/snakemake` run without activating the venv: the jobs' `invrender` is the one
 # installed beside this snakemake. (PATH is set here, not read, so it needs no `envvars:`.)
@@ -125,8 +195,41 @@ def _settle_mode(name):
         )
 
 
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def schema_of(default):
+    """The JSON schema a generator default implies for its override: the same type (an integer
+    where the default is one, any number where it is a float), and a vector's length."""
+    if isinstance(default, bool):
+        return {"type": "boolean"}
+    if isinstance(default, int):
+        return {"type": "integer"}
+    if isinstance(default, float):
+        return {"type": "number"}
+    if isinstance(default, str):
+        return {"type": "string"}
+    if isinstance(default, dict):
+        items = {key: schema_of(value) for key, value in default.items()}
+        return {"type": "object", "properties": items}
+    if isinstance(default, list) and default and all(map(_is_number, default)):
+        n = len(default)
+        return {
+            "type": "array",
+            "items": {"type": "number"},
+            "minItems": n,
+            "maxItems": n,
+        }
+    if isinstance(default, list):
+        return {"type": "array", "items": schema_of(default[0]) if default else {}}
+    return {}
+
+
 def _check_generator_config(name):
-    """Overrides of a generator's defaults: an unknown key is named now, not in a job."""
+    """Overrides of a generator's defaults: an unknown key (the generator's own merge_config
+    says which) or a value of another type than the default's is named now, not in a job.
+    """
     try:
         from invrender.synthesize import DUPLICATES_DEFAULTS, ROOM_DEFAULTS
         from invrender.synthesize.room import merge_config
@@ -136,10 +239,78 @@ def _check_generator_config(name):
     synthetic = SCENES[name]["synthetic"]
     kinds = {"room": ROOM_DEFAULTS, "duplicates": DUPLICATES_DEFAULTS}
     defaults = kinds[synthetic["kind"]]
+    where = f"scenes.{name}.synthetic.config"
     try:
-        merge_config(defaults, synthetic["config"], f"scenes.{name}.synthetic.config")
+        merge_config(defaults, synthetic["config"], where)
     except ValueError as error:
         raise WorkflowError(f"config: {error}") from None
+    schema = schema_of(defaults)
+    # --config hands numbers over as strings
+    coerce_strings(synthetic["config"], schema)
+    errors = jsonschema.Draft202012Validator(schema).iter_errors(synthetic["config"])
+    error = jsonschema.exceptions.best_match(errors)
+    if error is not None:
+        raise WorkflowError(schema_message(error, where.split(".")))
+
+
+def _check_features():
+    """What the schema cannot say of `features`: the bounds' order, and overrides that
+    contradict each other (the renderer's own rule, Features.__post_init__, decides)."""
+    features = config["features"]
+    if features["min_bounces"] > features["max_bounces"]:
+        raise WorkflowError(
+            f"config: features.min_bounces: {features['min_bounces']} is more than "
+            f"features.max_bounces ({features['max_bounces']}); expected at most it"
+        )
+    try:
+        from invrender.render.features import Features
+    except ImportError:
+        return  # snakemake runs outside the package's environment: the features job checks
+    overrides = features["overrides"]
+    try:
+        # The dependent effects off, so that only the overrides themselves can disagree: the
+        # analysis turns them off where the environment is off.
+        Features(window=False, env_sampling=False).with_overrides(overrides)
+    except ValueError as error:
+        problem = str(error).removeprefix("features: ")
+        raise WorkflowError(
+            f"config: features.overrides: {problem} (got {json.dumps(overrides)})"
+        ) from None
+
+
+def _check_device():
+    """The OpenCL device the ray-tracing jobs will choose (render/device.py's choice, given
+    config `device` or $INVRENDER_DEVICE) exists, where those jobs run on this machine. On a
+    cluster (--jobs with a remote executor) the login node's devices say nothing of the
+    compute nodes': each job checks there."""
+    selector = config["device"] or os.environ.get("INVRENDER_DEVICE")
+    if not selector and not any(has_mesh(scene) for scene in SCENES):
+        return  # nothing traces rays: no device needed
+    if not workflow.is_main_process or workflow.resource_settings.nodes is not None:
+        if selector:
+            logger.info(
+                f"config: device {selector!r} not checked here: jobs may run on other "
+                "machines (--jobs); each ray-tracing job checks it where it runs"
+            )
+        return
+    try:
+        from invrender.render.device import DeviceError, choose_device
+    except ImportError as error:
+        if selector:
+            logger.warning(
+                f"config: device {selector!r} not checked: snakemake's Python cannot "
+                f"import {error.name} (it runs outside the package's environment); each "
+                "ray-tracing job checks it"
+            )
+        return
+    try:
+        choose_device(config["device"])
+    except DeviceError as error:
+        if config["device"]:
+            raise WorkflowError(f"config: {error}") from None
+        problem = str(error).removeprefix("device: ")
+        source = "$INVRENDER_DEVICE (config device is null)" if selector else "device"
+        raise WorkflowError(f"config: {source}: {problem}") from None
 
 
 def cameras_file(capture):
@@ -310,6 +481,7 @@ for _name in SYNTHETIC:
     _check_generator_config(_name)
 for _name in CAPTURES:
     _check_capture(_name)
+_check_features()
 
 
 # ---------------------------------------------------------------------------- targets
@@ -325,6 +497,9 @@ def has_mesh(scene):
     """A synthetic capture has mesh.ply whatever its mode; of the users' captures, multiview
     ones (checked above)."""
     return is_synthetic(scene) or mode(scene) == "multiview"
+
+
+_check_device()
 
 
 def scene_targets(scene):
