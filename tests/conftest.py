@@ -3,9 +3,26 @@ a cache private to the test session unless INVRENDER_CACHE says otherwise."""
 
 import os
 import sys
+
+import pytest
 from pathlib import Path
 
 HERE = Path(__file__).parent
 for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_"):
     if str(helper_dir) not in sys.path:
         sys.path.insert(0, str(helper_dir))
+
+
+@pytest.fixture(scope="module")
+def stage_scene_dir(tmp_path_factory):
+    """A scene directory on disk, as a stage reads it: the box room with a window and a glossy
+    lobe (every feature the analysis can switch), its camera's image named view.exr."""
+    from testscenes import box_room
+
+    from invrender.scene.format import write_scene
+
+    path = tmp_path_factory.mktemp("stage") / "scene"
+    scene = box_room(window=True, ks=0.3, ka=0.05)
+    scene.cameras[0].name = "view.exr"
+    write_scene(path, scene)
+    return path
