@@ -124,6 +124,24 @@ def _kind_of(directory: Path) -> str | None:
         return None
 
 
+def _check_parent(path: Path) -> None:
+    """The output's nearest existing ancestor is a directory where this process can create it:
+    found before the work (by making and removing a hidden directory there, which also answers
+    for root on a read-only or special file system), not when the finished output is renamed."""
+    parent = path.absolute().parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise SceneError(parent, "output", f"a directory to hold {path}; it is a file")
+    probe = _temp_name(parent / path.name)
+    try:
+        probe.mkdir()
+        probe.rmdir()
+    except OSError as error:
+        raise SceneError(parent, "output", f"a directory where {path} can be written "
+                         f"({error.strerror or error})") from None
+
+
 def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = None) -> Path:
     """Refuse an output path that holds something a stage of ``kind`` did not write.
 
@@ -137,6 +155,7 @@ def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = Non
               else f"a new path, an empty directory or an earlier {kind} directory of invrender")
     if path.is_symlink():
         raise SceneError(path, "output", f"{wanted}, not a symbolic link (remove it or choose another --out)")
+    _check_parent(path)
     if not path.exists():
         return path
     if recognise is not None:
