@@ -48,7 +48,8 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
         missing = sorted(set(cameras) - {c.name for c in selected})
-        raise ValueError(f"{scene_dir}: cameras: no camera named {', '.join(missing)}")
+        raise SceneError(scene_dir, "cameras", f"a camera named {', '.join(missing)} (--camera); the scene has "
+                         f"{', '.join(c.name for c in scene.cameras)}")
     renderer = Renderer(scene, features, device=device)
     with atomic_dir(Path(out_dir), kind="renders") as tmp:
         tmp = Path(tmp)
