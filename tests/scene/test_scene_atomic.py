@@ -117,3 +117,26 @@ def test_temporaries_of_dead_processes_are_swept(tmp_path):
     with atomic_path(tmp_path / "f.json", kind="features", recognise=bool) as tmp:
         tmp.write_text("y")
     assert sorted(p.name for p in tmp_path.iterdir()) == [live.name, "f.json", "other", "out"]
+
+
+def test_a_signal_during_the_renames_waits_for_them(tmp_path, monkeypatch):
+    """Ctrl-C between renaming the old output aside and the new one in would leave neither."""
+    import signal
+
+    import invrender.scene.atomic as atomic
+
+    target = tmp_path / "out"
+    with atomic_dir(target, kind="renders") as tmp:
+        (tmp / "a").write_text("old")
+    real = os.replace
+
+    def replace_then_interrupt(source, destination):
+        real(source, destination)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(atomic.os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_dir(target, kind="renders") as tmp:
+            (tmp / "a").write_text("new")
+    assert (target / "a").read_text() == "new"
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]

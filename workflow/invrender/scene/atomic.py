@@ -29,7 +29,9 @@ import os
 import re
 import secrets
 import shutil
+import signal
 import socket
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
@@ -174,6 +176,20 @@ def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = Non
 
 
 @contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM wait (blocked, not lost) until the block ends, then act as usual."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    blocked = threading.current_thread() is threading.main_thread()
+    if blocked:
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        if blocked:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextmanager
 def atomic_path(path, fsync: bool = True, kind: str | None = None,
                 recognise: Callable[[Path], bool] | None = None):
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
@@ -228,6 +244,7 @@ def atomic_dir(path, kind: str, fsync: bool = True):
             break
         except FileExistsError:
             continue
+    old, done = None, False
     try:
         (tmp / MARKER).write_text(kind + "\n", encoding="utf-8")
         yield tmp
@@ -236,18 +253,20 @@ def atomic_dir(path, kind: str, fsync: bool = True):
                 for name in files:
                     _fsync_file(Path(root) / name)
         check_output(path, kind)  # whatever appeared there during the work is not lost either
-        old = None
-        if path.exists():
-            old = _temp_name(path, "old")
-            os.replace(path, old)
-        try:
-            os.replace(tmp, path)
-        except BaseException:
-            if old is not None:
-                os.replace(old, path)
-            raise
+        with _signals_held():  # a signal between the two renames would leave no output at all
+            if path.exists():
+                old = _temp_name(path, "old")
+                os.replace(path, old)
+            try:
+                os.replace(tmp, path)
+            except BaseException:
+                if old is not None:
+                    os.replace(old, path)
+                raise
+            done = True
     except BaseException:
-        _remove(tmp)
+        # A signal held during the renames arrives as they end: the new output stands then.
+        _remove(old if done and old is not None else tmp)
         raise
     if fsync:
         _fsync_dir(path.parent)
