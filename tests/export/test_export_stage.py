@@ -153,10 +153,10 @@ def test_a_missing_texture_fails_with_its_name_and_writes_nothing(demo_dirs, tmp
 def test_an_unwritable_output_fails_clearly_and_leaves_no_partial_usda(demo_dirs, tmp_path, capsys):
     blocker = tmp_path / "a_file"
     blocker.write_text("not a directory")
-    with pytest.raises(SceneError, match="a location that can be written"):
+    with pytest.raises(SceneError, match="a_file: output: expected a directory to hold .*; it is a file"):
         export_usd(demo_dirs["room"], blocker / "export")
     assert main(["export", str(demo_dirs["room"]), "--out", str(blocker / "export")]) == 2
-    assert "a location that can be written" in capsys.readouterr().err
+    assert "a_file: output: expected a directory to hold" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["a_file"]
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from invrender.cli import main
 from invrender.scene.atlas import AtlasTexels, dilate, texel_index
+from invrender.scene.atomic import MARKER
 from invrender.geometry.stage import run
 from invrender.scene.mesh_io import read_mesh
 from rooms import ROOM, sample_room
@@ -46,9 +47,9 @@ def stage_output(tmp_path_factory):
 
 def test_stage_writes_its_three_files(stage_output):
     out, report = stage_output
-    assert sorted(p.name for p in out.iterdir()) == ["atlas.npz", "geometry.json", "mesh.ply"]
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "atlas.npz", "geometry.json", "mesh.ply"]
     assert json.loads((out / "geometry.json").read_text()) == report
-    assert not list(out.parent.glob("out.tmp-*"))
+    assert not list(out.parent.glob(".out.tmp-*"))
     mesh = read_mesh(out / "mesh.ply")
     assert report["input_kind"] == "point_cloud"
     assert abs(report["simplification"]["faces_after"] - 5000) <= 250 == 0.05 * 5000
@@ -153,6 +154,7 @@ def test_failure_midway_keeps_the_previous_output(tmp_path, monkeypatch):
     source = sphere_mesh(tmp_path / "sphere.ply")
     out = tmp_path / "out"
     out.mkdir()
+    (out / MARKER).write_text("geometry\n")  # an earlier geometry output, which --out may replace
     (out / "old.txt").write_text("old")
 
     def broken(*args, **kwargs):
@@ -162,7 +164,7 @@ def test_failure_midway_keeps_the_previous_output(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         run(source, out, atlas_resolution=64, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "sphere.ply"]
-    assert [p.name for p in out.iterdir()] == ["old.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "old.txt"]
 
 
 def test_cli_end_to_end_on_a_small_mesh(tmp_path, caplog):

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from invrender.scene.atomic import MARKER
 from invrender.scene.cameras import read_colmap
 from invrender.scene.format import load_scene
 from invrender.scene.images import read_image, read_mask
@@ -77,7 +78,7 @@ def test_room_capture_layout(tmp_path):
     assert doc["metadata"]["kind"] == "room"
     assert not (out / "ground_truth" / "poses.json").exists()
     # The capture proper holds only what a user would bring: the true masks are truth.
-    assert sorted(p.name for p in out.iterdir()) == ["ground_truth", "images", "mesh.ply", "sparse"]
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "ground_truth", "images", "mesh.ply", "sparse"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture"]
 
 

@@ -4,10 +4,13 @@ function in the package that the tests call directly."""
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
+import os
 import signal
 import sys
+import tempfile
 import threading
 from dataclasses import fields
 from pathlib import Path
@@ -214,27 +217,94 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(SystemExit):
+    """SIGTERM as an exception: exit status 128 + 15, after unwinding."""
+
+
 def _exit_on_sigterm(signum, frame):
     # SIGTERM (scancel, a cluster's time limit, snakemake stopping its jobs) would end Python
-    # without unwinding; as SystemExit it unwinds like Ctrl-C, so atomic outputs remove their
+    # without unwinding; as an exception it unwinds like Ctrl-C, so atomic outputs remove their
     # temporary files and nothing half-written is left beside the output.
-    raise SystemExit(128 + signum)
+    raise Terminated(128 + signum)
+
+
+# Native modules whose import replaces the process's signal handlers without chaining to ours:
+# pycolmap installs glog's failure handler, which on SIGTERM prints a stack and kills the process
+# (no unwinding, so <out>.tmp-* stayed behind). Measured: pymeshlab, xatlas, OpenEXR, pyopencl,
+# torch, pxr, cv2 do not; PoCL's device set-up installs handlers that call the previous ones.
+# Importing these first, then installing ours, leaves ours in place: a later `import` of an
+# already imported module does not run its initialisation again.
+SIGNAL_TAKERS = ("pycolmap",)
+
+
+def install_signal_handlers() -> None:
+    for name in SIGNAL_TAKERS:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+class _OneLine(logging.Formatter):
+    """The terminal's lines: a traceback goes to the log file only (and here with -v)."""
+
+    def format(self, record):
+        if record.exc_info:
+            record = logging.makeLogRecord(record.__dict__ | {"exc_info": None, "exc_text": None})
+        return super().format(record)
+
+
+def _os_error(error: OSError) -> str:
+    """One line naming the file: "<path>: <what the system said>"."""
+    names = [str(n) for n in (error.filename, error.filename2) if n is not None]
+    return f"{' -> '.join(names) or '(no file named)'}: {error.strerror or error}"
+
+
+def _log_handlers(args) -> list[logging.Handler]:
+    stream = logging.StreamHandler(sys.stderr)
+    stream.setFormatter((logging.Formatter if args.verbose else _OneLine)(FORMAT))
+    handlers = [stream]
+    if args.log:
+        Path(args.log).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(args.log))  # flushes every record
+        handlers[-1].setFormatter(logging.Formatter(FORMAT))
+    return handlers
+
+
+def _bug_log(args, handlers: list) -> str:
+    """Where a bug's traceback goes: the --log file, else a file in the temporary directory."""
+    if args.log:
+        return args.log
+    handle, path = tempfile.mkstemp(prefix=f"invrender-{args.stage}-", suffix=".log")
+    os.close(handle)
+    handlers.append(logging.FileHandler(path))
+    handlers[-1].setFormatter(logging.Formatter(FORMAT))
+    logging.getLogger("invrender").addHandler(handlers[-1])
+    return path
+
+
+FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
 
 def main(argv=None) -> int:
+    """Run one stage. Exit status: 0 done; 2 bad input or an output that cannot be written (one
+    line naming the file); 1 a bug (one line naming the log, the traceback in it); 130/143
+    stopped by SIGINT/SIGTERM (nothing half-written is left). Every message also goes to --log."""
     args = build_parser().parse_args(argv)
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _exit_on_sigterm)
+        install_signal_handlers()
     # Handlers go on the package's logger, not the root: a host (pytest, a notebook) keeps its
     # own logging, and the rule's log file gets everything the stage says.
     log = logging.getLogger("invrender")
     log.setLevel(logging.DEBUG if args.verbose else logging.INFO)
-    handlers = [logging.StreamHandler(sys.stderr)]
-    if args.log:
-        Path(args.log).parent.mkdir(parents=True, exist_ok=True)
-        handlers.append(logging.FileHandler(args.log))
+    try:
+        handlers = _log_handlers(args)
+    except OSError as error:
+        print(f"invrender: --log: {_os_error(error)}", file=sys.stderr)
+        return 2
     for handler in handlers:
-        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
         log.addHandler(handler)
     from .scene.types import SceneError
 
@@ -243,6 +313,20 @@ def main(argv=None) -> int:
     except SceneError as error:
         log.error("%s", error)
         return 2
+    except OSError as error:  # permissions, a full disk, a parent that is a file
+        log.error("%s", _os_error(error))
+        return 2
+    except KeyboardInterrupt:
+        log.error("invrender %s: interrupted (SIGINT); nothing was written", args.stage)
+        return 130
+    except Terminated as stop:
+        log.error("invrender %s: terminated (SIGTERM); nothing was written", args.stage)
+        return stop.code
+    except Exception as error:  # a bug: the user sees one line, the log has the traceback
+        where = _bug_log(args, handlers)
+        log.error("invrender %s failed: %s: %s (a bug; the traceback is in %s)", args.stage,
+                  type(error).__name__, error, where, exc_info=True)
+        return 1
     finally:
         for handler in handlers:
             log.removeHandler(handler)

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
+from ..scene.atomic import check_output
 from ..scene.format import write_scene
 from ..scene.regions import face_texels
 from ..scene.packing import object_transform, pack_scene
@@ -431,6 +432,7 @@ def _check_camera_names(cameras: list, usd_path) -> None:
 
 def import_usd(usd_path, out_dir, exact: bool = True) -> Scene:
     """Read a USD stage (module docstring) and write it as a scene directory to `out_dir`."""
+    check_output(out_dir, "scene")  # before the work, not after it
     usd_path = Path(usd_path)
     if not usd_path.is_file():
         raise SceneError(usd_path, "(file)", "an existing USD file (.usda, .usdc, .usd)")

@@ -328,7 +328,7 @@ def _export(scene_dir: Path, out_dir: Path, usdc: bool, author) -> dict:
     """Author into a temporary directory (`author(tmp)` -> stage, summary of the layers), save,
     validate, write export.json and rename into place."""
     try:
-        with atomic_dir(out_dir) as tmp:
+        with atomic_dir(out_dir, kind="export") as tmp:
             stage, summarise = author(tmp)
             layers = ["scene.usda", "scene.usdc"] if usdc else ["scene.usda"]
             _save(stage, tmp, layers)

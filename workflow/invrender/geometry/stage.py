@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..scene.atomic import atomic_dir
+from ..scene.atomic import atomic_dir, check_output
 from ..scene.mesh_io import write_ply
 from ..scene.types import Mesh, SceneError
 from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
@@ -79,6 +79,7 @@ def run(
     timings: dict[str, float] = {}
     started = time.perf_counter()
 
+    check_output(out_dir, "geometry")  # before the work, not after it
     ms = load_geometry(source)  # refuses bad input before any work and before out_dir exists
     kind = input_kind(ms)
     loaded = ms.current_mesh()
@@ -163,7 +164,7 @@ def run(
                  100 * utilisation, median_density, 1.0 / median_density)
 
         bar.set_postfix_str("write")
-        with atomic_dir(out_dir) as tmp:
+        with atomic_dir(out_dir, kind="geometry") as tmp:
             tmp = Path(tmp)
             write_ply(tmp / "mesh.ply", out_mesh)
             texels.save(tmp / "atlas.npz")

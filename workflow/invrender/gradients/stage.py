@@ -18,7 +18,7 @@ from ..render.batches import ray_batch
 from ..render.features import Features
 from ..render.renderer import Renderer
 from ..render.torch_ops import MAP_ORDER
-from ..scene.atomic import atomic_dir
+from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import read_cameras
 from ..scene.capture import pixel_targets
 from ..scene.images import write_exr, write_png_preview
@@ -53,6 +53,7 @@ def signed_preview(gradient: np.ndarray) -> np.ndarray:
 def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
                     seed: int = 0, iteration: int = 0, device: str | None = None,
                     accumulation: str = "fixed") -> dict:
+    check_output(out_dir, "gradients")  # before the work, not after it
     scene = initial_scene(geometry_dir, cameras_path)
     total = sum(c.width * c.height for c in scene.cameras)
     requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
@@ -67,7 +68,7 @@ def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp
               "accumulation": accumulation,
               "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}
     log.info("loss %.6g over %d rays; gradient norms %s", report["loss"], len(requests), report["norms"])
-    with atomic_dir(Path(out_dir)) as tmp:
+    with atomic_dir(Path(out_dir), kind="gradients") as tmp:
         tmp = Path(tmp)
         for name in MAP_ORDER:
             g = grads[name] if name != "kg" else grads[name].reshape(-1, grads[name].shape[2], 3)

@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..scene.atomic import check_output
 from ..scene.atlas import bake, rasterize_atlas, triangle_areas, unwrap
 from ..scene.cameras import read_cameras
 from ..scene.cubemap import latlong_to_cube
@@ -49,6 +50,7 @@ def run(source, out_dir, cameras=None, environment=None, cube_size: int = 64, em
     ``emission_sides``: "one" (the default here: authored models have consistent winding, and
     Mitsuba, Cycles and USD mesh lights emit from the front only) or "two". Returns a summary.
     """
+    check_output(out_dir, "scene")  # before the work, not after it
     source = Path(source)
     obj_files = sorted(source.glob("*.obj")) if source.is_dir() else [source]
     if not obj_files:

@@ -11,7 +11,7 @@ import numpy as np
 from ..render.analysis import analyse
 from ..render.features import Features
 from ..render.renderer import Renderer
-from ..scene.atomic import atomic_dir
+from ..scene.atomic import atomic_dir, check_output
 from ..scene.format import load_scene
 from ..scene.images import write_exr, write_mask, write_png_preview
 from ..scene.types import SceneError
@@ -42,14 +42,16 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     its square root is the standard error), and <camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical axis
     (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1 (0 =
     miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
+    check_output(out_dir, "renders")  # before the work, not after it
     scene = load_scene(scene_dir)
     features = decide_features(scene, features_path, max_bounces, overrides, device)
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
         missing = sorted(set(cameras) - {c.name for c in selected})
-        raise ValueError(f"{scene_dir}: cameras: no camera named {', '.join(missing)}")
+        raise SceneError(scene_dir, "cameras", f"a camera named {', '.join(missing)} (--camera); the scene has "
+                         f"{', '.join(c.name for c in scene.cameras)}")
     renderer = Renderer(scene, features, device=device)
-    with atomic_dir(Path(out_dir)) as tmp:
+    with atomic_dir(Path(out_dir), kind="renders") as tmp:
         tmp = Path(tmp)
         (tmp / "aovs").mkdir()
         for camera in selected:

@@ -25,6 +25,7 @@ import xatlas
 
 from ..scene.atomic import atomic_path
 from ..scene.types import SceneError
+from .isolate import call_isolated
 
 __all__ = ["UVAtlas", "AtlasTexels", "unwrap", "rasterize_atlas", "dilate", "bake", "texel_index"]
 
@@ -81,7 +82,21 @@ def _fits(atlas, resolution: int) -> bool:
     return atlas.atlas_count == 1 and atlas.width <= resolution and atlas.height <= resolution
 
 
-def unwrap(
+# xatlas holds the GIL for its whole run (seconds per 10^4 faces here, 0.2 ms a face; forever on
+# some degenerate meshes, and it segfaults on others): ``unwrap`` runs it in a child process that
+# a signal or this limit ends. 60 s plus 5 ms a face is 25 times the time measured on spheres.
+UNWRAP_LIMIT_S = (60.0, 0.005)  # (seconds, seconds per face)
+
+
+def unwrap(positions, faces, **options) -> UVAtlas:
+    """``_unwrap`` (below) in a child process: a signal stops it at once, and a hang or a crash
+    of xatlas is a NativeFailure naming the face count, not a stage that never ends or dies."""
+    limit = UNWRAP_LIMIT_S[0] + UNWRAP_LIMIT_S[1] * len(faces)
+    return call_isolated(_unwrap, positions, faces, limit_s=limit, what=f"xatlas unwrapping {len(faces)} faces",
+                         **options)
+
+
+def _unwrap(
     positions,
     faces,
     *,

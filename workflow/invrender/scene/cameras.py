@@ -144,7 +144,7 @@ def write_colmap(directory, cameras: list[Camera]) -> None:
         rec.add_image_with_trivial_frame(
             pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose)
         )
-    with atomic_dir(directory) as tmp:
+    with atomic_dir(directory, kind="cameras") as tmp:
         rec.write_text(str(tmp))
 
 

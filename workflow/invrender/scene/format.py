@@ -354,7 +354,7 @@ def _write_dir(directory: Path, scene: Scene, doc: dict, metadata, meshes: dict,
     validate_scene_json(doc, directory / SCENE_JSON)
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"  # fails here, before anything is written
 
-    with atomic_dir(directory) as tmp:
+    with atomic_dir(directory, kind="scene") as tmp:
         for rel, mesh in meshes.items():
             write_ply(tmp / rel, mesh)
         for rel, image in images.items():

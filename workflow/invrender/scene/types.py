@@ -25,6 +25,9 @@ class SceneError(ValueError):
         self.file, self.field, self.expected = str(file), field, expected
         super().__init__(f"{file}: {field}: expected {expected}")
 
+    def __reduce__(self):  # survives pickling (scene/isolate.py sends it from a child process)
+        return type(self), (self.file, self.field, self.expected)
+
 
 @dataclass
 class Mesh:

@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 from tqdm import tqdm
 
-from ..scene.atomic import atomic_dir
+from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import write_colmap
 from ..scene.format import write_scene
 from ..scene.poses import write_poses
@@ -73,9 +73,9 @@ def write_capture(
     """
     if not scene.cameras:
         raise ValueError("write_capture: the scene has no cameras to render")
+    out_dir = check_output(out_dir, "capture")  # before the work, not after it
     renderer = (renderer_factory or _default_renderer)(scene)
-    out_dir = Path(out_dir)
-    with atomic_dir(out_dir) as tmp:
+    with atomic_dir(out_dir, kind="capture") as tmp:
         masks = tmp / "ground_truth" / "masks"
         (tmp / "images").mkdir()
         masks.mkdir(parents=True)

@@ -1,0 +1,46 @@
+"""Small inputs for every stage verb of the CLI, and each verb's arguments: the signal and the
+output-safety tests run every stage on these (seconds each)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from invrender.cli import main
+
+# A 2-view, 32 x 24 room: the smallest capture the synthesize stage makes.
+SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
+STAGES = ["synthesize", "cameras", "geometry", "gradients", "features", "render", "export", "import",
+          "import-usd"]
+
+
+def build_inputs(root: Path) -> Path:
+    """Every stage's input under `root`, made by the stages themselves (as the workflow does)."""
+    from objscene import write_room
+
+    (root / "room.yaml").write_text(yaml.safe_dump(SMALL_ROOM))
+    assert main(["synthesize", "room", "--out", str(root / "capture"), "--config", str(root / "room.yaml"),
+                 "--spp", "4"]) == 0
+    assert main(args("geometry", root, root / "geometry")) == 0
+    assert main(args("export", root, root / "export")) == 0
+    write_room(root / "objroom", lambda path, radiance: None)
+    return root
+
+
+def args(stage: str, root: Path, out: Path) -> list[str]:
+    """The command line of `stage` reading the inputs under `root` and writing `out`."""
+    capture, scene = root / "capture", root / "capture" / "ground_truth" / "scene"
+    tail = {
+        "synthesize": ["room", "--config", root / "room.yaml", "--spp", "4"],
+        "cameras": [capture / "sparse"],
+        "geometry": [capture / "mesh.ply", "--target-faces", "2000", "--atlas-resolution", "128"],
+        "gradients": ["--geometry", root / "geometry", "--cameras", capture / "sparse", "--images",
+                      capture / "images", "--spp", "1", "--batch", "256"],
+        "features": [scene],
+        "render": [scene, "--spp", "1"],
+        "export": [scene],
+        "import": [root / "objroom"],
+        "import-usd": [root / "export" / "scene.usda"],
+    }[stage]
+    return [stage, *map(str, tail), "--out", str(out)]
