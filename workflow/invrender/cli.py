@@ -69,10 +69,19 @@ def cmd_cameras(args):
 
 def cmd_geometry(args):
     from .geometry import stage
+    from .scene.atomic import sweep_stale
+    from .scene.isolate import call_isolated
 
-    stage.run(args.source, args.out, target_faces=args.target_faces, texels_per_meter=args.texels_per_meter,
-              atlas_resolution=args.atlas_resolution, padding=args.padding, poisson_depth=args.poisson_depth,
-              threads=args.threads)
+    # pymeshlab's filters hold the GIL (Poisson, decimation: seconds to minutes), so SIGTERM would
+    # wait for them: the stage runs in a child process that a signal here kills at once; the
+    # temporary output that the killed child leaves is swept right away.
+    try:
+        call_isolated(stage.run, args.source, args.out, target_faces=args.target_faces,
+                      texels_per_meter=args.texels_per_meter, atlas_resolution=args.atlas_resolution,
+                      padding=args.padding, poisson_depth=args.poisson_depth, threads=args.threads,
+                      what="geometry")
+    finally:
+        sweep_stale(args.out)
 
 
 def cmd_gradients(args):
