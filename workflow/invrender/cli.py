@@ -326,15 +326,21 @@ def main(argv=None) -> int:
         log.error("%s", _os_error(error))
         return 2
     except KeyboardInterrupt:
-        log.error("invrender %s: interrupted (SIGINT); nothing was written", args.stage)
+        log.error("invrender %s: interrupted (SIGINT); no partial output left", args.stage)
         return 130
     except Terminated as stop:
-        log.error("invrender %s: terminated (SIGTERM); nothing was written", args.stage)
+        log.error("invrender %s: terminated (SIGTERM); no partial output left", args.stage)
         return stop.code
+    except SystemExit as stop:  # an argument refused after parsing (--set): its message, logged too
+        if not isinstance(stop.code, str):
+            raise
+        log.error("%s", stop.code)
+        return 2
     except Exception as error:  # a bug: the user sees one line, the log has the traceback
         where = _bug_log(args, handlers)
+        first = (str(error).splitlines() or [""])[0]  # one line: the rest is in the traceback
         log.error("invrender %s failed: %s: %s (a bug; the traceback is in %s)", args.stage,
-                  type(error).__name__, error, where, exc_info=True)
+                  type(error).__name__, first, where, exc_info=True)
         return 1
     finally:
         for handler in handlers:
