@@ -69,10 +69,19 @@ def cmd_cameras(args):
 
 def cmd_geometry(args):
     from .geometry import stage
+    from .scene.atomic import sweep_stale
+    from .scene.isolate import call_isolated
 
-    stage.run(args.source, args.out, target_faces=args.target_faces, texels_per_meter=args.texels_per_meter,
-              atlas_resolution=args.atlas_resolution, padding=args.padding, poisson_depth=args.poisson_depth,
-              threads=args.threads)
+    # pymeshlab's filters hold the GIL (Poisson, decimation: seconds to minutes), so SIGTERM would
+    # wait for them: the stage runs in a child process that a signal here kills at once; the
+    # temporary output that the killed child leaves is swept right away.
+    try:
+        call_isolated(stage.run, args.source, args.out, target_faces=args.target_faces,
+                      texels_per_meter=args.texels_per_meter, atlas_resolution=args.atlas_resolution,
+                      padding=args.padding, poisson_depth=args.poisson_depth, threads=args.threads,
+                      what="geometry")
+    finally:
+        sweep_stale(args.out)
 
 
 def cmd_gradients(args):
@@ -317,15 +326,21 @@ def main(argv=None) -> int:
         log.error("%s", _os_error(error))
         return 2
     except KeyboardInterrupt:
-        log.error("invrender %s: interrupted (SIGINT); nothing was written", args.stage)
+        log.error("invrender %s: interrupted (SIGINT); no partial output left", args.stage)
         return 130
     except Terminated as stop:
-        log.error("invrender %s: terminated (SIGTERM); nothing was written", args.stage)
+        log.error("invrender %s: terminated (SIGTERM); no partial output left", args.stage)
         return stop.code
+    except SystemExit as stop:  # an argument refused after parsing (--set): its message, logged too
+        if not isinstance(stop.code, str):
+            raise
+        log.error("%s", stop.code)
+        return 2
     except Exception as error:  # a bug: the user sees one line, the log has the traceback
         where = _bug_log(args, handlers)
+        first = (str(error).splitlines() or [""])[0]  # one line: the rest is in the traceback
         log.error("invrender %s failed: %s: %s (a bug; the traceback is in %s)", args.stage,
-                  type(error).__name__, error, where, exc_info=True)
+                  type(error).__name__, first, where, exc_info=True)
         return 1
     finally:
         for handler in handlers:
