@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_dir
-from .cameras import _check_camera, read_cameras, write_colmap
+from .cameras import check_camera, read_cameras, write_colmap
 from .cubemap import kg_from_stacked, kg_to_stacked
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
@@ -331,7 +331,7 @@ def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
     disk_maps = _maps_on_disk_layout(scene.maps, files["kg"])
     validate_maps(disk_maps, files)
     for cam in scene.cameras:
-        _check_camera(cam, directory / DEFAULT_FILES["cameras"])
+        check_camera(cam, directory / DEFAULT_FILES["cameras"])
 
     doc = {
         "format": FORMAT,
@@ -387,7 +387,7 @@ def _write_v2(directory: Path, scene: Scene, metadata) -> None:
     images[V2_KG] = _maps_on_disk_layout(scene.maps, kg_file)["kg"]
     validate_kg(images[V2_KG], kg_file, "kg")
     for cam in scene.cameras:
-        _check_camera(cam, directory / DEFAULT_FILES["cameras"])
+        check_camera(cam, directory / DEFAULT_FILES["cameras"])
     doc = {"format": FORMAT, "version": 2, "units": "meters", "up": "+Y", "objects": entries,
            "materials": {name: {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS} for name in materials},
            "kg": V2_KG}
