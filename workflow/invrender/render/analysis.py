@@ -81,6 +81,23 @@ def has_one_sided_emitters(mesh, maps) -> bool:
     return bool(maps.kw.max() > 0 or np.any(one_sided & (emitted_power(mesh, maps) > 0)))
 
 
+def unphysical_albedo(maps) -> str | None:
+    """One line naming the map and the texel with the largest directional albedo, if it is above
+    1 (a surface reflecting more than it receives: each bounce adds energy), else None."""
+    from .bsdf import max_albedo
+
+    rho = max_albedo(maps.kd, maps.ks, maps.ka).max(axis=-1)
+    y, x = np.unravel_index(int(np.argmax(rho)), rho.shape)
+    if not rho[y, x] > 1.0:
+        return None
+    diffuse = float(max_albedo(maps.kd[y, x], np.zeros(3), maps.ka[y, x]).max())
+    culprit = "kd" if diffuse > 1.0 else "ks"
+    return (f"map {culprit}: texel (x {x}, y {y}) has a directional albedo of up to {rho[y, x]:.3g} > 1 "
+            f"(kd {np.round(maps.kd[y, x], 3).tolist()}, ks {np.round(maps.ks[y, x], 3).tolist()}, "
+            f"ka {float(maps.ka[y, x]):.3g}): "
+            f"it reflects more light than it receives ({int((rho > 1).sum())} such texels)")
+
+
 def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
                   device: str | None = None):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.analysis import analyse
+from ..render.analysis import analyse, unphysical_albedo
 from ..render.features import Features
 from ..render.renderer import Renderer
 from ..scene.atomic import atomic_dir
 from ..scene.format import load_scene
 from ..scene.images import write_exr, write_mask, write_png_preview
-from ..scene.types import SceneError
+from ..scene.format import SCENE_JSON
+from ..scene.types import SceneError, require_positive
 
 log = logging.getLogger(__name__)
 
@@ -42,12 +43,17 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     out_dir/aovs/<camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical axis
     (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1 (0 =
     miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
+    spp = require_positive("render --spp", "samples per pixel", spp)
     scene = load_scene(scene_dir)
+    if not scene.cameras:
+        raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", "a COLMAP model with at least one camera to render")
+    warn_unphysical(scene, scene_dir)
     features = decide_features(scene, features_path, max_bounces, overrides, device)
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
         missing = sorted(set(cameras) - {c.name for c in selected})
-        raise ValueError(f"{scene_dir}: cameras: no camera named {', '.join(missing)}")
+        raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", f"a camera named {', '.join(missing)} "
+                         f"(--camera); the scene has {', '.join(c.name for c in scene.cameras[:5])}")
     renderer = Renderer(scene, features, device=device)
     with atomic_dir(Path(out_dir)) as tmp:
         tmp = Path(tmp)
@@ -57,6 +63,13 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
             log.info("rendered %s at %d spp (%d non-finite samples dropped)", camera.name, spp, out["dropped"])
             write_view(tmp, Path(camera.name).stem, out)
     return features
+
+
+def warn_unphysical(scene, scene_dir) -> None:
+    """A scene that creates energy still renders (an optimiser may pass through one): one warning."""
+    problem = unphysical_albedo(scene.maps)
+    if problem:
+        log.warning("%s: %s", scene_dir, problem)
 
 
 def write_view(out_dir: Path, stem: str, out: dict) -> None:
