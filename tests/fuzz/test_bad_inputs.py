@@ -196,3 +196,16 @@ def test_colmap_missing_rig_names_the_frames_file(tmp_path):
     (sparse / "frames.txt").write_text("1 42 1 0 0 0 0 0 0 1 CAMERA 1 1\n")
     outcome = cameras(tmp_path, sparse, ("frames.txt",))
     assert outcome.code == 2 and "rig_id" in outcome.errors[0] and "42" in outcome.errors[0], outcome.errors
+
+
+# ---------------------------------------------------------------------------- found by the fuzz suite
+
+
+@pytest.mark.parametrize("reader", ["read_image", "read_mask"])
+def test_an_empty_image_file_is_a_clear_error(tmp_path, reader):
+    """Fuzz finding: OpenCV raises cv2.error (a traceback naming no file) on an empty buffer."""
+    from invrender.scene import images
+
+    (tmp_path / "mask.png").write_bytes(b"")
+    with pytest.raises(images.SceneError, match=r"mask\.png: \(file\): expected"):
+        getattr(images, reader)(tmp_path / "mask.png")

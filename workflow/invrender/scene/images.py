@@ -47,10 +47,19 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
 _LUT8 = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
 
 
-def _read_bytes(path: Path) -> np.ndarray:
+def _decode(path: Path, what: str) -> np.ndarray:
+    """OpenCV's decoding of an image file; an empty or undecodable file is one SceneError (OpenCV
+    raises on an empty buffer and returns None on a broken one)."""
     if not path.is_file():
         raise SceneError(path, "(file)", "an existing image file")
-    return np.fromfile(path, np.uint8)
+    data = np.fromfile(path, np.uint8)
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error:
+        img = None
+    if img is None:
+        raise SceneError(path, "(file)", what)
+    return img
 
 
 def _read_exr(path: Path) -> np.ndarray:
@@ -103,9 +112,7 @@ def read_image(path, finite: bool = True) -> np.ndarray:
     if path.suffix.lower() in EXR_SUFFIXES:
         image = _read_exr(path)
         return check_finite(image, path) if finite else image
-    img = cv2.imdecode(_read_bytes(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise SceneError(path, "(file)", "an image OpenCV can decode (PNG, JPEG, TIFF, EXR)")
+    img = _decode(path, "an image OpenCV can decode (PNG, JPEG, TIFF, EXR)")
     if img.ndim == 2:
         img = img[:, :, None]
     if img.shape[2] == 4:
@@ -129,9 +136,7 @@ def read_image(path, finite: bool = True) -> np.ndarray:
 def read_mask(path) -> np.ndarray:
     """Read an instance-id mask (single-channel 8- or 16-bit PNG) as (H, W) uint16, unchanged."""
     path = Path(path)
-    img = cv2.imdecode(_read_bytes(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise SceneError(path, "(file)", "a PNG instance mask OpenCV can decode")
+    img = _decode(path, "a PNG instance mask OpenCV can decode")
     if img.ndim != 2:
         raise SceneError(path, "channels", f"a single-channel mask, got {img.shape[2]} channels")
     if img.dtype not in (np.uint8, np.uint16):
