@@ -136,11 +136,17 @@ def test_a_non_finite_capture_pixel_is_refused_naming_file_and_pixel(tmp_path, v
     assert outcome.code == 2 and "pixel (x 3, y 2) channel 1" in outcome.errors[0], outcome.errors
 
 
-def test_a_json_report_refuses_nan():
+def test_a_nan_loss_is_never_written_as_json(tmp_path, monkeypatch):
+    """Should a NaN reach a report by another road, the write fails (allow_nan=False) and the
+    output is not created: gradients.json never holds the invalid token NaN again."""
     from invrender.gradients import stage
 
+    geometry_dir, sparse, images = gradient_inputs(tmp_path)
+    nan_radiance = lambda self, cameras, requests, spp, seed: (np.full((len(requests), 3), np.nan), None, None)
+    monkeypatch.setattr(stage.Renderer, "render_requests", nan_radiance)
     with pytest.raises(ValueError, match="not JSON compliant"):
-        stage.json.dumps({"loss": float("nan")}, allow_nan=False)  # what every stage's report write passes
+        stage.run(geometry_dir, sparse, images, tmp_path / "gradients", batch=64, spp=1)
+    assert not (tmp_path / "gradients").exists()
 
 
 # ---------------------------------------------------------------------------- defect 9: accepted nonsense
