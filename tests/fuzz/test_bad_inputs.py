@@ -215,3 +215,15 @@ def test_an_empty_image_file_is_a_clear_error(tmp_path, reader):
     (tmp_path / "mask.png").write_bytes(b"")
     with pytest.raises(images.SceneError, match=r"mask\.png: \(file\): expected"):
         getattr(images, reader)(tmp_path / "mask.png")
+
+
+def test_a_mesh_a_few_millimetres_across_is_unwrapped(tmp_path):
+    """Fuzz finding: xatlas took every face of a 1.4 mm sheet as degenerate and made no atlas (a
+    RuntimeError traceback); it now charts a copy scaled by a power of two."""
+    positions, faces = grid_mesh(4, 1e-3)
+    write_obj(tmp_path / "tiny.obj", positions, faces)
+    geometry(tmp_path, tmp_path / "tiny.obj", expect_code=0)
+    atlas = json.loads((tmp_path / "out" / "geometry.json").read_text())["atlas"]
+    assert atlas["utilisation"] > 0.5, atlas
+    # 64 texels across a 1 mm sheet, less the padding: about 60,000 texels per metre
+    assert 4e4 < atlas["texel_density_per_m"] < 6.4e4, atlas
