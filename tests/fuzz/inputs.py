@@ -93,18 +93,18 @@ def write_json(path: Path, doc) -> None:
     Path(path).write_text(json.dumps(doc))  # NaN / Infinity tokens allowed: bad input on purpose
 
 
-def gradient_inputs(root: Path) -> tuple[Path, Path, Path]:
+def gradient_inputs(root: Path, image: str = "view.exr") -> tuple[Path, Path, Path]:
     """(geometry dir, COLMAP model, images dir) of testscenes.box_room, as the geometry, cameras
-    and synthesize stages write them; the image view.exr is a uniform grey."""
+    and synthesize stages write them; the camera's image (named ``image``) is a uniform grey EXR."""
     scene = box_room()
-    scene.cameras[0].name = "view.exr"
+    scene.cameras[0].name = image
     geometry, sparse, images = root / "geometry", root / "sparse", root / "images"
     geometry.mkdir(parents=True)
     write_mesh_ply(geometry / "mesh.ply", scene.mesh)
     np.savez(geometry / "atlas.npz", mask=np.ones(scene.maps.atlas_shape, bool))
     write_colmap(sparse, scene.cameras)
     images.mkdir()
-    write_exr(images / "view.exr", np.full((24, 32, 3), 0.5, np.float32))
+    write_exr(images / image, np.full((24, 32, 3), 0.5, np.float32))
     return geometry, sparse, images
 
 

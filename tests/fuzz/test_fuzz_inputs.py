@@ -163,11 +163,12 @@ def test_fuzz_capture_images_through_gradients(fmt, size, channels, bad, pixel, 
     assume(channels != 2 and not (fmt.startswith("exr") and channels == 4))  # what OpenEXR / OpenCV write
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        geometry, sparse, images = gradient_inputs(root)
+        path_name = "view.exr" if fmt.startswith("exr") else "view.png"
+        geometry, sparse, images = gradient_inputs(root, path_name)
         image = np.full((*size, channels), 0.5, np.float32)
         if bad is not None:
             image[min(pixel[0], size[0] - 1), min(pixel[1], size[1] - 1), channels - 1] = bad
-        path = images / "view.exr"
+        path = images / path_name
         if fmt.startswith("exr"):
             dtype = np.float16 if fmt == "exr_half" else np.float32
             names = "RGB" if channels == 3 else "Y"
@@ -179,13 +180,13 @@ def test_fuzz_capture_images_through_gradients(fmt, size, channels, bad, pixel, 
             scale = 255 if fmt == "png8" else 65535
             pixels = (np.clip(np.nan_to_num(image), 0, 1) * scale).astype(np.uint8 if fmt == "png8" else np.uint16)
             ok, data = cv2.imencode(".png", pixels)
-            path.write_bytes(data.tobytes())  # a PNG named .exr: refused by the EXR reader, by name
+            path.write_bytes(data.tobytes())
         if cut is not None:
             truncate(path, cut)
         out = root / "gradients"
         outcome = check_property(root, out, ["gradients", "--geometry", geometry, "--cameras", sparse, "--images",
                                              images, "--out", out, "--spp", "1", "--batch", "64"],
-                                 subprocess_run=False, names=("view.exr",))
+                                 subprocess_run=False, names=(path_name,))
     if bad is not None and not np.isfinite(bad) and fmt.startswith("exr") and cut is None:
         assert outcome.code == 2
 

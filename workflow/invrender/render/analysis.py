@@ -93,7 +93,8 @@ def unphysical_albedo(maps) -> str | None:
     diffuse = float(max_albedo(maps.kd[y, x], np.zeros(3), maps.ka[y, x]).max())
     culprit = "kd" if diffuse > 1.0 else "ks"
     return (f"map {culprit}: texel (x {x}, y {y}) has a directional albedo of up to {rho[y, x]:.3g} > 1 "
-            f"(kd {np.round(maps.kd[y, x], 3).tolist()}, ks {np.round(maps.ks[y, x], 3).tolist()}, "
+            f"(kd {np.round(maps.kd[y, x].astype(float), 3).tolist()}, "
+            f"ks {np.round(maps.ks[y, x].astype(float), 3).tolist()}, "
             f"ka {float(maps.ka[y, x]):.3g}): "
             f"it reflects more light than it receives ({int((rho > 1).sum())} such texels)")
 
