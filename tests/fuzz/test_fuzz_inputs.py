@@ -45,7 +45,22 @@ def truncate(path: Path, fraction: float) -> None:
 
 
 MESH_FAULTS = ["none", "index", "negative_index", "nan", "inf", "far_vertex", "truncate", "no_faces",
-               "garbage", "empty", "two_vertex_face", "huge_index"]
+               "garbage", "empty", "two_vertex_face", "huge_index", "collinear", "header_lie", "cloud",
+               "cloud_zero_normal", "cloud_nan_normal"]
+
+
+def write_cloud(path: Path, positions, normals, fmt: str) -> None:
+    """A point cloud with normals: PLY x, y, z, nx, ny, nz, or OBJ v and vn lines, no faces."""
+    if fmt == "obj":
+        path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in positions.tolist())
+                        + "".join(f"vn {x!r} {y!r} {z!r}\n" for x, y, z in normals.tolist()))
+        return
+    header = ["ply", f"format {'binary_little_endian' if fmt == 'ply_binary' else 'ascii'} 1.0",
+              f"element vertex {len(positions)}", *[f"property float {c}" for c in ("x", "y", "z", "nx", "ny", "nz")],
+              "end_header"]
+    rows = np.hstack([positions, normals]).astype("<f4")
+    body = rows.tobytes() if fmt == "ply_binary" else "".join(" ".join(map(repr, r)) + "\n" for r in rows.tolist()).encode()
+    path.write_bytes(("\n".join(header) + "\n").encode() + body)
 
 
 @PROFILE
@@ -70,10 +85,19 @@ def test_fuzz_meshes_through_geometry(fmt, n, log_scale, fault, where, fraction)
         faces = faces[:0]
     elif fault == "empty":
         positions, faces = positions[:0], faces[:0]
+    elif fault == "collinear":
+        positions[:, 1:] = 0.0  # every face has zero area
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         source = root / f"mesh.{fmt.split('_')[0]}"
-        if fmt == "obj":
+        if fault.startswith("cloud"):
+            rng = np.random.default_rng(n)
+            points = rng.normal(size=(400, 3)) * 10.0 ** log_scale
+            normals = points / np.linalg.norm(points, axis=1, keepdims=True)  # a blob: normals outward
+            normals[int(where * 399)] = {"cloud": normals[0], "cloud_zero_normal": 0.0,
+                                         "cloud_nan_normal": np.nan}[fault]
+            write_cloud(source, points, normals, fmt)
+        elif fmt == "obj":
             write_obj(source, positions, faces)
         else:
             write_ply(source, np.clip(positions, -3e38, 3e38), np.clip(faces, -2**31, 2**31 - 1), fmt == "ply_binary")
@@ -81,12 +105,16 @@ def test_fuzz_meshes_through_geometry(fmt, n, log_scale, fault, where, fraction)
             truncate(source, fraction)
         elif fault == "garbage":
             source.write_bytes(source.read_bytes()[:int(fraction * source.stat().st_size)] + b"\x00\xff garbage f 1 x\n")
+        elif fault == "header_lie" and fmt != "obj":  # the header counts more faces than follow
+            data = source.read_bytes()
+            source.write_bytes(data.replace(f"element face {len(faces)}".encode(), f"element face {len(faces) + 7}".encode()))
         elif fault == "two_vertex_face":
             source.write_text(source.read_text(errors="replace") + "f 1 2\n") if fmt == "obj" else None
         out = root / "out"
         outcome = check_property(root, out, ["geometry", source, "--out", out, "--atlas-resolution", "64"],
                                  subprocess_run=True, names=("mesh.",))
-    if fault in ("index", "negative_index", "huge_index", "nan", "inf", "far_vertex", "no_faces", "empty") \
+    if fault in ("index", "negative_index", "huge_index", "nan", "inf", "far_vertex", "no_faces", "empty",
+                 "collinear", "cloud_zero_normal", "cloud_nan_normal") or (fault == "header_lie" and fmt != "obj") \
             or abs(log_scale) >= 6:
         assert outcome.code == 2, (fault, log_scale, "accepted")
     if fault == "none" and -3 <= log_scale <= 3 and n >= 4:  # n = 3: 8 faces, below min_island_faces
@@ -170,9 +198,10 @@ def test_fuzz_capture_images_through_gradients(fmt, size, channels, bad, pixel, 
             image[min(pixel[0], size[0] - 1), min(pixel[1], size[1] - 1), channels - 1] = bad
         path = images / path_name
         if fmt.startswith("exr"):
-            dtype = np.float16 if fmt == "exr_half" else np.float32
+            dtype = np.float16 if fmt == "exr_half" else np.float32  # 1e5 overflows half to inf: bad too
             names = "RGB" if channels == 3 else "Y"
-            planes = {c: np.ascontiguousarray(image[..., i], dtype) for i, c in enumerate(names)}
+            with np.errstate(over="ignore"):
+                planes = {c: np.ascontiguousarray(image[..., i], dtype) for i, c in enumerate(names)}
             header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
             with OpenEXR.File(header, planes) as exr:
                 exr.write(str(path))
