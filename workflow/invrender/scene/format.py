@@ -278,7 +278,8 @@ def load_scene(directory) -> Scene:
 
     mesh = read_mesh(directory / doc["mesh"], require_uvs=True)
     map_files = {name: directory / doc["maps"][name] for name in MAP_NAMES}
-    maps = validate_maps({name: read_image(path) for name, path in map_files.items()}, map_files)
+    # finite=False: _check_map refuses non-finite texels itself, naming the map's field
+    maps = validate_maps({name: read_image(path, finite=False) for name, path in map_files.items()}, map_files)
     cameras = read_cameras(directory / doc["cameras"]) if "cameras" in doc else []
     return Scene(mesh=mesh, maps=maps, cameras=cameras, path=directory)
 
@@ -299,7 +300,8 @@ def _load_v2(directory: Path, doc: dict) -> Scene:
     materials = {}
     for name, rels in doc["materials"].items():
         files = {m: directory / rel for m, rel in rels.items()}
-        materials[name] = validate_atlas({m: read_image(path) for m, path in files.items()}, files, f"materials.{name}")
+        materials[name] = validate_atlas({m: read_image(path, finite=False) for m, path in files.items()}, files,
+                                         f"materials.{name}")
     objects = [
         SceneObject(name=entry["name"], mesh=meshes[entry["mesh"]], material=entry["material"],
                     transform=check_transform(entry.get("transform", np.eye(4).tolist()), file, f"objects[{k}].transform"),
@@ -307,7 +309,7 @@ def _load_v2(directory: Path, doc: dict) -> Scene:
         for k, entry in enumerate(doc["objects"])
     ]
     validate_objects(objects, materials, file)
-    kg = validate_kg(read_image(directory / doc["kg"]), directory / doc["kg"], "kg")
+    kg = validate_kg(read_image(directory / doc["kg"], finite=False), directory / doc["kg"], "kg")
     cameras = read_cameras(directory / doc["cameras"]) if "cameras" in doc else []
     return pack_scene(objects, materials, kg, cameras, path=directory)
 
