@@ -6,7 +6,7 @@ import json
 import logging
 from pathlib import Path
 
-from ..render.analysis import AnalysisSettings, analyse_scene, unphysical_albedo
+from ..render.analysis import AnalysisSettings, analyse_scene, warn_unphysical_albedo
 from ..scene.atomic import atomic_path
 from ..scene.format import load_scene
 
@@ -17,9 +17,7 @@ def run(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), ov
         device: str | None = None):
     """Analyse a scene directory and write features.json (features + the evidence behind them)."""
     scene = load_scene(scene_dir)
-    problem = unphysical_albedo(scene.maps)
-    if problem:
-        log.warning("%s: %s", scene_dir, problem)
+    warn_unphysical_albedo(scene.maps, scene_dir, log)
     features, evidence = analyse_scene(scene, settings, overrides, device)
     log.info("features of %s: %s", scene_dir, features)
     document = features.to_json() | {"evidence": evidence}

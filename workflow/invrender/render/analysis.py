@@ -107,6 +107,14 @@ def unphysical_albedo(maps) -> str | None:
             f"ks {np.round(ks[y, x], 3).tolist()}, ka {float(maps.ka[y, x]):.3g}; {int((rho > 1).sum())} such texels)")
 
 
+def warn_unphysical_albedo(maps, where, log) -> None:
+    """A scene that creates energy still renders (an optimiser may pass through one): one
+    warning line, naming ``where`` (the scene) and the texel."""
+    problem = unphysical_albedo(maps)
+    if problem:
+        log.warning("%s: %s", where, problem)
+
+
 def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
                   device: str | None = None):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""

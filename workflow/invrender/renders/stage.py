@@ -8,13 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.analysis import analyse, unphysical_albedo
+from ..render.analysis import analyse, warn_unphysical_albedo
 from ..render.features import Features
 from ..render.renderer import Renderer
 from ..scene.atomic import atomic_dir
-from ..scene.format import load_scene
+from ..scene.format import SCENE_JSON, load_scene
 from ..scene.images import write_exr, write_mask, write_png_preview
-from ..scene.format import SCENE_JSON
 from ..scene.types import SceneError, require_positive
 
 log = logging.getLogger(__name__)
@@ -47,7 +46,7 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     scene = load_scene(scene_dir)
     if not scene.cameras:
         raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", "a COLMAP model with at least one camera to render")
-    warn_unphysical(scene, scene_dir)
+    warn_unphysical_albedo(scene.maps, scene_dir, log)
     features = decide_features(scene, features_path, max_bounces, overrides, device)
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
@@ -63,13 +62,6 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
             log.info("rendered %s at %d spp (%d non-finite samples dropped)", camera.name, spp, out["dropped"])
             write_view(tmp, Path(camera.name).stem, out)
     return features
-
-
-def warn_unphysical(scene, scene_dir) -> None:
-    """A scene that creates energy still renders (an optimiser may pass through one): one warning."""
-    problem = unphysical_albedo(scene.maps)
-    if problem:
-        log.warning("%s: %s", scene_dir, problem)
 
 
 def write_view(out_dir: Path, stem: str, out: dict) -> None:
