@@ -8,7 +8,7 @@ import pytest
 from pathlib import Path
 
 HERE = Path(__file__).parent
-for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_"):
+for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_", HERE / "fuzz"):
     if str(helper_dir) not in sys.path:
         sys.path.insert(0, str(helper_dir))
 

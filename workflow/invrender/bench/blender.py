@@ -55,7 +55,7 @@ def run_blender(request: dict, out: Path) -> dict:
             f"no Python with Blender's bpy at {python}: python3.11 -m venv .venv-blender && "
             ".venv-blender/bin/pip install -r envs/blender.txt"
         )
-    (out / "request.json").write_text(json.dumps(request))
+    (out / "request.json").write_text(json.dumps(request, allow_nan=False))
     run = subprocess.run(
         [str(python), str(CLIENT), str(out / "request.json"), str(out)], capture_output=True, text=True, cwd=out
     )

@@ -256,7 +256,7 @@ def main(request_path, out_dir):
         scene.camera = scene.objects[render["camera"]]
         scene.render.filepath = str(out_dir / f"{name}.exr")
         bpy.ops.render.render(write_still=True)
-    (out_dir / "facts.json").write_text(json.dumps(facts, indent=1))
+    (out_dir / "facts.json").write_text(json.dumps(facts, indent=1, allow_nan=False))
 
 
 if __name__ == "__main__":

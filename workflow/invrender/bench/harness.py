@@ -322,7 +322,7 @@ def write_report(out: Path, name: str, title: str, report: dict, tables: dict, s
     text.append("Machine: " + ", ".join(f"{k}={v}" for k, v in report["machine"].items()))
     text += [f"NOTE: {n}" for n in report["notes"]]
     table = "\n".join(text) + "\n"
-    (out / f"{name}.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
+    (out / f"{name}.json").write_text(json.dumps(report, indent=1, default=float, allow_nan=False) + "\n")
     for key in sections:
         write_csv(out / f"{name}_{key}.csv", report[key])
     (out / f"{name}_table.md").write_text(table)

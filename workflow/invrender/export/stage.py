@@ -337,7 +337,7 @@ def _export(scene_dir: Path, out_dir: Path, usdc: bool, author) -> dict:
                 if errors:
                     raise RuntimeError(f"export of {scene_dir}: {layer} fails validation: " + "; ".join(errors))
             summary = summarise(layers)
-            (tmp / "export.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+            (tmp / "export.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     except OSError as exc:
         raise SceneError(out_dir, "(output directory)", f"a location that can be written ({exc})") from None
     log.info("exported %s -> %s: %s", scene_dir, out_dir, json.dumps(summary["prims"]))

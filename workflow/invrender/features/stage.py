@@ -6,7 +6,7 @@ import json
 import logging
 from pathlib import Path
 
-from ..render.analysis import AnalysisSettings, analyse_scene
+from ..render.analysis import AnalysisSettings, analyse_scene, warn_unphysical_albedo
 from ..scene.atomic import atomic_path, check_output
 from ..scene.format import load_scene
 
@@ -27,9 +27,10 @@ def run(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), ov
     """Analyse a scene directory and write features.json (features + the evidence behind them)."""
     check_output(out_path, "features", is_features_json)  # before the work, not after it
     scene = load_scene(scene_dir)
+    warn_unphysical_albedo(scene.maps, scene_dir, log)
     features, evidence = analyse_scene(scene, settings, overrides, device)
     log.info("features of %s: %s", scene_dir, features)
     document = features.to_json() | {"evidence": evidence}
     with atomic_path(Path(out_path), kind="features", recognise=is_features_json) as tmp:
-        Path(tmp).write_text(json.dumps(document, indent=2) + "\n")
+        Path(tmp).write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
     return features

@@ -2,8 +2,9 @@
 
 - ``load_geometry``: a PLY/OBJ triangle mesh, or a point cloud with normals (PLY with nx, ny, nz
   and no faces; OBJ with one ``vn`` per ``v``), into a ``pymeshlab.MeshSet``. The file is read
-  once with our own parsers first, because pymeshlab silently drops vertices with NaN positions
-  (and the faces using them) and ignores the normals of an OBJ point cloud.
+  with our own parsers only and handed to pymeshlab as arrays: pymeshlab silently drops vertices
+  with NaN positions (and the faces using them), ignores the normals of an OBJ point cloud, and
+  its loaders crash on bad face indices.
 - ``clean_mesh``: merge duplicate vertices, drop duplicate and zero-area faces, faces on
   non-manifold edges, small islands and unreferenced vertices; returns what each step removed.
 - ``reconstruct``: screened Poisson from the point cloud, then trims the faces far from every input
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pymeshlab
 
-from ..scene.mesh_io import obj_statements, read_ply_vertices
+from ..scene.mesh_io import check_extent, obj_statements, read_ply_vertices, read_triangles
 from ..scene.types import SceneError
 
 __all__ = [
@@ -100,19 +101,16 @@ def load_geometry(path) -> pymeshlab.MeshSet:
 
     ms = pymeshlab.MeshSet()
     if face_count > 0:
-        try:
-            ms.load_new_mesh(str(path))
-        except pymeshlab.PyMeshLabException as exc:
-            reason = " ".join(str(exc).split())
-            raise SceneError(path, "(file)", f"a mesh file pymeshlab can read ({reason})") from None
-        mesh = ms.current_mesh()
-        if mesh.face_number() == 0:
-            raise SceneError(path, "faces", f"{NO_FACES}; the {face_count} faces in the file read as none")
-        mesh.set_label("mesh")
+        # pymeshlab's own loaders crash (signal 11) on faults such as an OBJ face index past the
+        # vertex count: it only ever sees arrays our readers have checked, never the file.
+        mesh = read_triangles(path)
+        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(mesh.positions, np.float64),
+                                   face_matrix=np.asarray(mesh.faces, np.int32)), "mesh")
         return ms
 
     if normals is None:
         raise SceneError(path, "faces", f"{NO_FACES}; got {len(positions)} vertices with neither")
+    check_extent(positions, path)
     length = np.linalg.norm(normals, axis=1)
     bad = ~np.isfinite(length) | (length < 1e-6)
     if bad.any():

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.mesh_io import write_ply
-from ..scene.types import Mesh, SceneError
+from ..scene.types import Mesh, SceneError, require_positive
 from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from .clean import DEFAULT_TARGET_FACES, clean_mesh, input_kind, load_geometry, reconstruct, simplify
 
@@ -71,11 +71,14 @@ def run(
     """
     source, out_dir = Path(source), Path(out_dir)
     if texels_per_meter is not None:
-        if not texels_per_meter > 0:
-            raise ValueError(f"texels_per_meter must be positive, got {texels_per_meter}")
+        if not (np.isfinite(texels_per_meter) and texels_per_meter > 0):
+            raise SceneError("geometry --texels-per-meter", "texel density", f"a positive number, got {texels_per_meter}")
         atlas_resolution = None
-    elif not atlas_resolution or atlas_resolution < 8:
-        raise ValueError(f"atlas_resolution must be at least 8, got {atlas_resolution}")
+    else:
+        require_positive("geometry --atlas-resolution", "atlas size", atlas_resolution, minimum=8)
+    require_positive("geometry --target-faces", "face count", target_faces, minimum=4)
+    require_positive("geometry --padding", "texels", padding, minimum=0)
+    require_positive("geometry --poisson-depth", "octree depth", poisson_depth, minimum=1)
     timings: dict[str, float] = {}
     started = time.perf_counter()
 
@@ -170,7 +173,7 @@ def run(
             texels.save(tmp / "atlas.npz")
             t0 = done("write", t0)
             report["timings_s"] = timings | {"total": round(time.perf_counter() - started, 3)}
-            (tmp / "geometry.json").write_text(json.dumps(report, indent=2) + "\n")
+            (tmp / "geometry.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
     log.info("geometry: wrote %s (%d faces, %dx%d atlas) in %.1f s", out_dir, len(uv.faces), uv.width,
              uv.height, report["timings_s"]["total"])
     return report

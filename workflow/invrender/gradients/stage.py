@@ -23,7 +23,7 @@ from ..scene.cameras import read_cameras
 from ..scene.capture import pixel_targets
 from ..scene.images import write_exr, write_png_preview
 from ..scene.mesh_io import read_mesh
-from ..scene.types import Maps, Scene
+from ..scene.types import Maps, Scene, SceneError, require_positive
 
 log = logging.getLogger(__name__)
 # A neutral start in which every map receives a gradient: some light everywhere (ke, and kg
@@ -54,7 +54,11 @@ def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp
                     seed: int = 0, iteration: int = 0, device: str | None = None,
                     accumulation: str = "fixed") -> dict:
     check_output(out_dir, "gradients")  # before the work, not after it
+    spp = require_positive("gradients --spp", "samples per pixel", spp)
+    batch = require_positive("gradients --batch", "rays per batch", batch)
     scene = initial_scene(geometry_dir, cameras_path)
+    if not scene.cameras:
+        raise SceneError(cameras_path, "(cameras)", "at least one posed camera")
     total = sum(c.width * c.height for c in scene.cameras)
     requests = ray_batch(scene.cameras, min(batch, total), seed, iteration)
     target = pixel_targets(images_dir, scene.cameras, requests)
@@ -74,5 +78,5 @@ def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp
             g = grads[name] if name != "kg" else grads[name].reshape(-1, grads[name].shape[2], 3)
             write_exr(tmp / f"{name}.exr", g)
             write_png_preview(tmp / f"{name}.png", signed_preview(g), exposure=1.0)
-        (tmp / "gradients.json").write_text(json.dumps(report, indent=2) + "\n")
+        (tmp / "gradients.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
     return report

@@ -81,6 +81,40 @@ def has_one_sided_emitters(mesh, maps) -> bool:
     return bool(maps.kw.max() > 0 or np.any(one_sided & (emitted_power(mesh, maps) > 0)))
 
 
+def unphysical_albedo(maps) -> str | None:
+    """One line naming the map and the texel with the largest directional albedo at normal
+    incidence, if it is above 1 (a surface reflecting more light than it receives), else None.
+
+    Normal incidence, not render/bsdf.max_albedo's bound over all angles: MILO's model sums the
+    lobes without energy conservation, so towards grazing even kd 0.9, ks 0.04 exceeds 1 (1.4),
+    and a warning on every ordinary material says nothing. ks = 1 with kd 0.8 is 1.8 at normal
+    incidence: that is the input a user mistyped."""
+    from .bsdf import KA_MIN, f90, specular_albedo_terms
+
+    # The lobe's terms on 64 roughness nodes, each texel taking the node at or below its ka (a
+    # smoother lobe reflects more): a 1024^2 atlas of distinct ka in a tenth of a second.
+    ka_nodes = np.geomspace(KA_MIN, 1.0, 64)
+    node = np.clip(np.searchsorted(ka_nodes, np.asarray(maps.ka, np.float64), side="right") - 1, 0, 63)
+    a1, a2 = (a[node][..., None] for a in specular_albedo_terms(0.0, ka_nodes))
+    kd, ks = np.asarray(maps.kd, np.float64), np.asarray(maps.ks, np.float64)
+    rho = (kd + ks * a1 + f90(ks) * a2).max(axis=-1)
+    y, x = np.unravel_index(int(np.argmax(rho)), rho.shape)
+    if not rho[y, x] > 1.0:
+        return None
+    culprit = "kd" if kd[y, x].max() > 1.0 else "ks"
+    return (f"map {culprit}: texel (x {x}, y {y}) reflects more light than it receives: directional albedo "
+            f"{rho[y, x]:.3g} > 1 at normal incidence (kd {np.round(kd[y, x], 3).tolist()}, "
+            f"ks {np.round(ks[y, x], 3).tolist()}, ka {float(maps.ka[y, x]):.3g}; {int((rho > 1).sum())} such texels)")
+
+
+def warn_unphysical_albedo(maps, where, log) -> None:
+    """A scene that creates energy still renders (an optimiser may pass through one): one
+    warning line, naming ``where`` (the scene) and the texel."""
+    problem = unphysical_albedo(maps)
+    if problem:
+        log.warning("%s: %s", where, problem)
+
+
 def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
                   device: str | None = None):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.analysis import analyse
+from ..render.analysis import analyse, warn_unphysical_albedo
 from ..render.features import Features
 from ..render.renderer import Renderer
 from ..scene.atomic import atomic_dir, check_output
-from ..scene.format import load_scene
+from ..scene.format import SCENE_JSON, load_scene
 from ..scene.images import write_exr, write_mask, write_png_preview
-from ..scene.types import SceneError
+from ..scene.types import SceneError, require_positive
 
 log = logging.getLogger(__name__)
 
@@ -43,13 +43,17 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1 (0 =
     miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
     check_output(out_dir, "renders")  # before the work, not after it
+    spp = require_positive("render --spp", "samples per pixel", spp)
     scene = load_scene(scene_dir)
+    if not scene.cameras:
+        raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", "a COLMAP model with at least one camera to render")
+    warn_unphysical_albedo(scene.maps, scene_dir, log)
     features = decide_features(scene, features_path, max_bounces, overrides, device)
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
         missing = sorted(set(cameras) - {c.name for c in selected})
-        raise SceneError(scene_dir, "cameras", f"a camera named {', '.join(missing)} (--camera); the scene has "
-                         f"{', '.join(c.name for c in scene.cameras)}")
+        raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", f"a camera named {', '.join(missing)} "
+                         f"(--camera); the scene has {', '.join(c.name for c in scene.cameras[:5])}")
     renderer = Renderer(scene, features, device=device)
     with atomic_dir(Path(out_dir), kind="renders") as tmp:
         tmp = Path(tmp)

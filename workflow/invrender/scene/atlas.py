@@ -58,6 +58,12 @@ def _pack_options(texels_per_unit: float, resolution: int, padding: int) -> xatl
     return pack
 
 
+def _chart_scale(positions: np.ndarray) -> np.float32:
+    """The power of two that brings the bounding-box diagonal to at least 1 (1 if it is)."""
+    diagonal = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0))) if len(positions) else 1.0
+    return np.float32(2.0 ** max(0, int(np.ceil(-np.log2(diagonal))))) if 0 < diagonal < 1 else np.float32(1)
+
+
 def _chart(meshes, texels_per_unit: float, padding: int, chart_options):
     """xatlas charts (the slow part: segmentation and parametrization) packed at one density."""
     atlas = xatlas.Atlas()
@@ -135,14 +141,18 @@ def _unwrap(
         face_idx = np.flatnonzero(groups == g)
         verts, local = np.unique(faces[face_idx], return_inverse=True)
         parts.append((face_idx, verts, local.reshape(-1, 3).astype(np.uint32)))
-    meshes = [(positions[verts], local) for _, verts, local in parts]
+    # xatlas takes faces below about 1e-7 of area as degenerate: a mesh a few millimetres across
+    # gave no atlas at all. It charts a copy scaled by a power of two (exact) to at least 1 m;
+    # densities are per unit of that copy. Meshes of 1 m and more are charted as they are.
+    k = _chart_scale(positions)
+    meshes = [(positions[verts] * k, local) for _, verts, local in parts]
 
     if texels_per_meter is not None:
-        atlas = _chart(meshes, texels_per_meter, padding, chart_options)
+        atlas = _chart(meshes, texels_per_meter / k, padding, chart_options)
         results = [atlas[i] for i in range(len(parts))]
     else:
         resolution = int(resolution)
-        area = float(triangle_areas(positions, faces).sum())
+        area = float(triangle_areas(positions, faces).sum()) * k * k
         if area <= 0:
             raise ValueError("unwrap: the mesh has zero area")
         density = resolution / np.sqrt(area)  # every texel used: an upper bound

@@ -24,7 +24,7 @@ import numpy as np
 from .atomic import atomic_dir
 from .types import Camera, SceneError
 
-__all__ = ["read_cameras", "read_colmap", "read_transforms_json", "write_colmap", "project_points"]
+__all__ = ["read_cameras", "read_colmap", "read_transforms_json", "write_colmap", "check_camera", "project_points"]
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def read_colmap(directory) -> list[Camera]:
     try:
         rec = pycolmap.Reconstruction(str(directory))
     except Exception as exc:  # pycolmap raises ValueError / IndexError with COLMAP's message
-        raise SceneError(directory, "(COLMAP model)", f"a readable COLMAP sparse model ({exc})") from None
+        raise _colmap_error(directory, exc) from None
     cameras_file = _model_file(directory, "cameras")
     out = []
     skipped = []
@@ -86,8 +86,7 @@ def read_colmap(directory) -> list[Camera]:
                 f"one of {', '.join(SUPPORTED_MODELS)}, got {model}",
             )
         pose = image.cam_from_world().matrix()
-        out.append(
-            Camera(
+        camera = Camera(
                 name=image.name,
                 model=model,
                 width=int(cam.width),
@@ -96,22 +95,66 @@ def read_colmap(directory) -> list[Camera]:
                 R=np.asarray(pose[:, :3], np.float64).copy(),
                 t=np.asarray(pose[:, 3], np.float64).copy(),
             )
-        )
+        check_camera(camera, cameras_file, f"camera {image.camera_id} (image {image.name})")
+        out.append(camera)
     if skipped:
         log.warning("%s: %d image(s) without a pose skipped: %s", directory, len(skipped), ", ".join(skipped[:5]))
     return out
 
 
-def _check_camera(cam: Camera, where) -> None:
+# How far outside the image the principal point may lie, as a fraction of the image's size: real
+# lenses put it within a few percent of the centre; farther out is a unit or crop mistake.
+PRINCIPAL_POINT_MARGIN = 0.25
+
+
+def check_camera(cam: Camera, file, field: str | None = None) -> None:
+    """Refuse a camera that cannot image anything: an unsupported model or parameter count, a
+    size below 1 pixel, non-finite parameters, focal lengths that are not positive, a principal
+    point more than PRINCIPAL_POINT_MARGIN of the image outside it, or a pose that is not a finite
+    rigid transform (R orthonormal, det +1). ``field`` names the camera in the file (default:
+    ``camera <name>``)."""
+    field = field or f"camera {cam.name}"
     if cam.model not in SUPPORTED_MODELS:
-        raise SceneError(where, f"camera {cam.name} model", f"one of {', '.join(SUPPORTED_MODELS)}, got {cam.model}")
-    if len(cam.params) != PARAM_COUNT[cam.model]:
-        raise SceneError(
-            where, f"camera {cam.name} params", f"{PARAM_COUNT[cam.model]} values for {cam.model}, got {len(cam.params)}"
-        )
-    R = np.asarray(cam.R, np.float64)
-    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-        raise SceneError(where, f"camera {cam.name} R", "a 3x3 rotation matrix")
+        raise SceneError(file, f"{field} model", f"one of {', '.join(SUPPORTED_MODELS)}, got {cam.model}")
+    params = np.asarray(cam.params, np.float64)
+    if len(params) != PARAM_COUNT[cam.model]:
+        raise SceneError(file, f"{field} params", f"{PARAM_COUNT[cam.model]} values for {cam.model}, got {len(params)}")
+    if not (cam.width >= 1 and cam.height >= 1):
+        raise SceneError(file, f"{field} width,height", f"at least 1 pixel each, got {cam.width} x {cam.height}")
+    if not np.isfinite(params).all():
+        raise SceneError(file, f"{field} params", f"finite numbers, got {params.tolist()}")
+    (fx, fy), (cx, cy) = cam.focal, cam.principal_point
+    if not (fx > 0 and fy > 0):
+        raise SceneError(file, f"{field} focal length", f"positive focal lengths (pixels), got fx {fx:g}, fy {fy:g}")
+    mx, my = PRINCIPAL_POINT_MARGIN * cam.width, PRINCIPAL_POINT_MARGIN * cam.height
+    if not (-mx <= cx <= cam.width + mx and -my <= cy <= cam.height + my):
+        raise SceneError(file, f"{field} principal point", f"cx, cy within the {cam.width} x {cam.height} image "
+                         f"or {PRINCIPAL_POINT_MARGIN:.0%} of its size outside it, got ({cx:g}, {cy:g})")
+    R, t = np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64)
+    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
+        raise SceneError(file, f"{field} pose", "a finite rotation and translation")
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise SceneError(file, f"{field} pose rotation", f"an orthonormal rotation with det +1, got det "
+                         f"{np.linalg.det(R):.6g}")
+
+
+def _colmap_error(directory: Path, exc: Exception) -> SceneError:
+    """COLMAP's failed check as a SceneError naming the model file it concerns and the field."""
+    message = " ".join(str(exc).split())
+    reason = message.split("] ", 1)[-1].replace("Check failed: ", "")
+    lower = message.lower()
+    if "verifyparams" in lower:
+        return SceneError(_model_file(directory, "cameras"), "camera params",
+                          f"the parameter count and values of each camera's model ({reason})")
+    if "rig with id" in lower:
+        return SceneError(_model_file(directory, "frames"), "frame rig_id",
+                          f"the id of a rig in {_model_file(directory, 'rigs').name} ({reason})")
+    # Which file a failed check concerns, by the words COLMAP's readers use for its fields.
+    for name, words in (("frames", ("rig with id", "frame", "rig_from_world", "data_id")), ("rigs", ("rig", "sensor")),
+                        ("cameras", ("camera",)), ("images", ("image",)), ("points3D", ("point",))):
+        if any(w in lower for w in words):
+            return SceneError(_model_file(directory, name), "(COLMAP model)", f"a readable {name} file ({reason})")
+    return SceneError(directory, "(COLMAP model)", f"a readable COLMAP sparse model ({reason})")
 
 
 def write_colmap(directory, cameras: list[Camera]) -> None:
@@ -130,7 +173,7 @@ def write_colmap(directory, cameras: list[Camera]) -> None:
         raise SceneError(directory, f"camera {dup} name", "unique image names")
     rec = pycolmap.Reconstruction()
     for i, cam in enumerate(cameras, 1):
-        _check_camera(cam, directory)
+        check_camera(cam, directory)
         rec.add_camera_with_trivial_rig(
             pycolmap.Camera(
                 camera_id=i,
@@ -302,17 +345,10 @@ def read_transforms_json(path) -> list[Camera]:
         u, _, vt = np.linalg.svd(rot)  # snap to the nearest rotation
         rot = u @ vt
         R = rot.T
-        out.append(
-            Camera(
-                name=name,
-                model=model,
-                width=int(round(w)),
-                height=int(round(h)),
-                params=np.asarray(params, np.float64),
-                R=R,
-                t=-R @ center,
-            )
-        )
+        camera = Camera(name=name, model=model, width=int(round(w)), height=int(round(h)),
+                        params=np.asarray(params, np.float64), R=R, t=-R @ center)
+        check_camera(camera, path, f"{field} ({name})")
+        out.append(camera)
     out.sort(key=lambda c: c.name)
     names = [c.name for c in out]
     if len(set(names)) != len(names):

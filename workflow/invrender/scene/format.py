@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_dir
-from .cameras import _check_camera, read_cameras, write_colmap
+from .cameras import check_camera, read_cameras, write_colmap
 from .cubemap import kg_from_stacked, kg_to_stacked
 from .images import read_image, write_exr
 from .mesh_io import read_mesh, validate_mesh, write_ply
@@ -278,7 +278,8 @@ def load_scene(directory) -> Scene:
 
     mesh = read_mesh(directory / doc["mesh"], require_uvs=True)
     map_files = {name: directory / doc["maps"][name] for name in MAP_NAMES}
-    maps = validate_maps({name: read_image(path) for name, path in map_files.items()}, map_files)
+    # finite=False: _check_map refuses non-finite texels itself, naming the map's field
+    maps = validate_maps({name: read_image(path, finite=False) for name, path in map_files.items()}, map_files)
     cameras = read_cameras(directory / doc["cameras"]) if "cameras" in doc else []
     return Scene(mesh=mesh, maps=maps, cameras=cameras, path=directory)
 
@@ -299,7 +300,8 @@ def _load_v2(directory: Path, doc: dict) -> Scene:
     materials = {}
     for name, rels in doc["materials"].items():
         files = {m: directory / rel for m, rel in rels.items()}
-        materials[name] = validate_atlas({m: read_image(path) for m, path in files.items()}, files, f"materials.{name}")
+        materials[name] = validate_atlas({m: read_image(path, finite=False) for m, path in files.items()}, files,
+                                         f"materials.{name}")
     objects = [
         SceneObject(name=entry["name"], mesh=meshes[entry["mesh"]], material=entry["material"],
                     transform=check_transform(entry.get("transform", np.eye(4).tolist()), file, f"objects[{k}].transform"),
@@ -307,7 +309,7 @@ def _load_v2(directory: Path, doc: dict) -> Scene:
         for k, entry in enumerate(doc["objects"])
     ]
     validate_objects(objects, materials, file)
-    kg = validate_kg(read_image(directory / doc["kg"]), directory / doc["kg"], "kg")
+    kg = validate_kg(read_image(directory / doc["kg"], finite=False), directory / doc["kg"], "kg")
     cameras = read_cameras(directory / doc["cameras"]) if "cameras" in doc else []
     return pack_scene(objects, materials, kg, cameras, path=directory)
 
@@ -331,7 +333,7 @@ def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
     disk_maps = _maps_on_disk_layout(scene.maps, files["kg"])
     validate_maps(disk_maps, files)
     for cam in scene.cameras:
-        _check_camera(cam, directory / DEFAULT_FILES["cameras"])
+        check_camera(cam, directory / DEFAULT_FILES["cameras"])
 
     doc = {
         "format": FORMAT,
@@ -387,7 +389,7 @@ def _write_v2(directory: Path, scene: Scene, metadata) -> None:
     images[V2_KG] = _maps_on_disk_layout(scene.maps, kg_file)["kg"]
     validate_kg(images[V2_KG], kg_file, "kg")
     for cam in scene.cameras:
-        _check_camera(cam, directory / DEFAULT_FILES["cameras"])
+        check_camera(cam, directory / DEFAULT_FILES["cameras"])
     doc = {"format": FORMAT, "version": 2, "units": "meters", "up": "+Y", "objects": entries,
            "materials": {name: {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS} for name in materials},
            "kg": V2_KG}

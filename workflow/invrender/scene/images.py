@@ -20,6 +20,7 @@ from .types import SceneError
 
 __all__ = [
     "read_image",
+    "check_finite",
     "read_mask",
     "write_exr",
     "write_png_preview",
@@ -46,10 +47,19 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
 _LUT8 = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
 
 
-def _read_bytes(path: Path) -> np.ndarray:
+def _decode(path: Path, what: str) -> np.ndarray:
+    """OpenCV's decoding of an image file; an empty or undecodable file is one SceneError (OpenCV
+    raises on an empty buffer and returns None on a broken one)."""
     if not path.is_file():
         raise SceneError(path, "(file)", "an existing image file")
-    return np.fromfile(path, np.uint8)
+    data = np.fromfile(path, np.uint8)
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error:
+        img = None
+    if img is None:
+        raise SceneError(path, "(file)", what)
+    return img
 
 
 def _read_exr(path: Path) -> np.ndarray:
@@ -78,18 +88,31 @@ def _read_exr(path: Path) -> np.ndarray:
     return np.stack(planes, axis=-1)
 
 
-def read_image(path) -> np.ndarray:
+def check_finite(image: np.ndarray, path) -> np.ndarray:
+    """Refuse an image with a NaN or infinite value, naming the first bad pixel (row-major) and
+    its channel: one would make every loss and gradient it touches NaN."""
+    bad = ~np.isfinite(image)
+    if bad.any():
+        y, x, c = (int(i) for i in np.argwhere(bad.reshape(image.shape[0], image.shape[1], -1))[0])
+        value = image.reshape(image.shape[0], image.shape[1], -1)[y, x, c]
+        raise SceneError(path, f"pixel (x {x}, y {y}) channel {c}",
+                         f"finite values, got {value} ({int(bad.sum())} non-finite values)")
+    return image
+
+
+def read_image(path, finite: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, C), C = 1 or 3, RGB order.
 
     EXR values are returned as stored (assumed linear). 8- and 16-bit PNG / JPEG / TIFF
-    values are decoded from sRGB to linear. Alpha channels are dropped.
+    values are decoded from sRGB to linear. Alpha channels are dropped. Every input (a capture,
+    a map, an environment) must be finite; ``finite=False`` reads outputs that may hold inf (the
+    depth AOV of a miss).
     """
     path = Path(path)
     if path.suffix.lower() in EXR_SUFFIXES:
-        return _read_exr(path)
-    img = cv2.imdecode(_read_bytes(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise SceneError(path, "(file)", "an image OpenCV can decode (PNG, JPEG, TIFF, EXR)")
+        image = _read_exr(path)
+        return check_finite(image, path) if finite else image
+    img = _decode(path, "an image OpenCV can decode (PNG, JPEG, TIFF, EXR)")
     if img.ndim == 2:
         img = img[:, :, None]
     if img.shape[2] == 4:
@@ -106,15 +129,14 @@ def read_image(path) -> np.ndarray:
         out = img.astype(np.float32)
     else:
         raise SceneError(path, "pixel type", f"8-bit, 16-bit or float pixels, got {img.dtype}")
-    return np.ascontiguousarray(out, dtype=np.float32)
+    out = np.ascontiguousarray(out, dtype=np.float32)
+    return check_finite(out, path) if finite else out
 
 
 def read_mask(path) -> np.ndarray:
     """Read an instance-id mask (single-channel 8- or 16-bit PNG) as (H, W) uint16, unchanged."""
     path = Path(path)
-    img = cv2.imdecode(_read_bytes(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise SceneError(path, "(file)", "a PNG instance mask OpenCV can decode")
+    img = _decode(path, "a PNG instance mask OpenCV can decode")
     if img.ndim != 2:
         raise SceneError(path, "channels", f"a single-channel mask, got {img.shape[2]} channels")
     if img.dtype not in (np.uint8, np.uint16):

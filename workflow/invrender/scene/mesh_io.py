@@ -23,7 +23,16 @@ import plyfile
 from .atomic import atomic_path
 from .types import Mesh, SceneError
 
-__all__ = ["read_mesh", "read_ply", "read_obj", "write_ply", "validate_mesh"]
+__all__ = ["read_mesh", "read_ply", "read_obj", "read_triangles", "write_ply", "validate_mesh", "check_extent"]
+
+# Extents a capture can have: a bounding-box diagonal from a small object (1 mm) to a large site
+# (10 km). Beyond them the input is in the wrong unit or broken, and xatlas and pymeshlab misbehave
+# (an atlas of 3 covered texels, a hang) instead of failing.
+MIN_DIAGONAL_M, MAX_DIAGONAL_M = 1e-3, 1e4
+# A vertex farther from the bulk of the mesh (the box of the 1st-99th percentiles of each axis)
+# than this many bulk diagonals is a stray (one vertex at 1e30), not part of the scene. Tested only
+# with enough vertices for the percentiles to describe a bulk.
+OUTLIER_DIAGONALS, OUTLIER_MIN_VERTICES = 10.0, 100
 
 UV_PROPERTY_PAIRS = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
 MISSING_UVS = "vertex s,t (texture coordinates)"
@@ -63,6 +72,7 @@ def validate_mesh(mesh: Mesh, path, require_uvs: bool = True) -> None:
             path, f"vertex {i} x,y,z", f"finite coordinates, got {positions[i].tolist()} "
             f"({int(bad.sum())} non-finite vertices)"
         )
+    check_extent(positions, path)
     faces = np.asarray(mesh.faces)
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise SceneError(path, "face vertex_indices", f"(F, 3) triangles, got shape {faces.shape}")
@@ -88,6 +98,46 @@ def validate_mesh(mesh: Mesh, path, require_uvs: bool = True) -> None:
             raise SceneError(path, f"vertex {i} s,t", f"finite texture coordinates, got {uvs[i].tolist()}")
     if mesh.instance_ids is not None and np.asarray(mesh.instance_ids).shape != (len(faces),):
         raise SceneError(path, "face instance_id", f"one id per face ({len(faces)})")
+
+
+def check_extent(positions, path) -> None:
+    """Refuse finite positions whose extent no capture has: a bounding-box diagonal outside
+    [MIN_DIAGONAL_M, MAX_DIAGONAL_M], or a vertex more than OUTLIER_DIAGONALS bulk diagonals
+    outside the bulk of the vertices. The error names the file, the vertex and the extent."""
+    p = np.asarray(positions, np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if len(p) >= OUTLIER_MIN_VERTICES:
+        b_lo, b_hi = np.percentile(p, [1, 99], axis=0)
+        bulk = max(float(np.linalg.norm(b_hi - b_lo)), MIN_DIAGONAL_M)
+        outside = np.linalg.norm(np.maximum(b_lo - p, 0) + np.maximum(p - b_hi, 0), axis=1)
+        i = int(np.argmax(outside))
+        if outside[i] > OUTLIER_DIAGONALS * bulk:
+            raise SceneError(path, f"vertex {i} x,y,z", f"a vertex near the others, got {p[i].tolist()}, "
+                             f"{outside[i]:.3g} m outside the box of 98% of the vertices (diagonal {bulk:.3g} m)")
+    if not MIN_DIAGONAL_M <= diagonal <= MAX_DIAGONAL_M:
+        far = int(np.argmax(np.linalg.norm(p - np.median(p, axis=0), axis=1)))
+        raise SceneError(path, "vertex x,y,z (extent)", f"a bounding-box diagonal between {MIN_DIAGONAL_M:g} m "
+                         f"and {MAX_DIAGONAL_M:g} m (meters), got {diagonal:.3g} m; farthest vertex {far} at "
+                         f"{p[far].tolist()}")
+
+
+def read_triangles(path) -> Mesh:
+    """A PLY or OBJ mesh's positions and triangles only (``uvs=None``, vertices not split at UV
+    seams), validated: what a stage that makes its own UVs reads, and what it hands a native
+    library instead of the file."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".ply":
+        mesh = read_ply(path, require_uvs=False, with_uvs=False)
+    elif suffix == ".obj":
+        parsed = _parse_obj(path)
+        parsed["texcoords"] = np.zeros((0, 2))
+        mesh = _obj_mesh(parsed, path, require_uvs=False)
+    else:
+        raise SceneError(path, "(file name)", f"a .ply or .obj mesh, got '{path.suffix}'")
+    validate_mesh(mesh, path, require_uvs=False)
+    return mesh
 
 
 # ---------------------------------------------------------------------------- PLY
@@ -137,13 +187,13 @@ def read_ply_vertices(path):
     return data, np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=1), vprops
 
 
-def read_ply(path, require_uvs: bool = True) -> Mesh:
+def read_ply(path, require_uvs: bool = True, with_uvs: bool = True) -> Mesh:
     path = Path(path)
     data, positions, vprops = read_ply_vertices(path)
     names = [el.name for el in data.elements]
     vertex = data["vertex"]
     uvs = None
-    for a, b in UV_PROPERTY_PAIRS:
+    for a, b in UV_PROPERTY_PAIRS if with_uvs else ():
         if a in vprops and b in vprops:
             uvs = np.stack([np.asarray(vertex[a], np.float64), np.asarray(vertex[b], np.float64)], axis=1)
             break
@@ -158,7 +208,7 @@ def read_ply(path, require_uvs: bool = True) -> Mesh:
     raw = face[key]
     instance = np.asarray(face["instance_id"], np.int64) if "instance_id" in fprops else None
     wedge = None
-    if uvs is None and "texcoord" in fprops:
+    if uvs is None and with_uvs and "texcoord" in fprops:
         wedge = face["texcoord"]
 
     if len(face.data) == 0:
@@ -254,6 +304,8 @@ def _obj_index(token: str, count: int, path, line_no: int, what: str) -> int:
         raise SceneError(path, f"line {line_no} f", f"integer {what} indices, got '{token}'") from None
     if i == 0:
         raise SceneError(path, f"line {line_no} f", f"1-based {what} indices, got 0")
+    if abs(i) >= 2**31:  # no file has that many; int64 arrays would overflow
+        raise SceneError(path, f"line {line_no} f", f"{what} indices below 2^31, got {i}")
     return i - 1 if i > 0 else count + i
 
 

@@ -29,6 +29,14 @@ class SceneError(ValueError):
         return type(self), (self.file, self.field, self.expected)
 
 
+def require_positive(file, field: str, value, minimum: int = 1) -> int:
+    """A count the user gave (samples per pixel, a batch size) as an int >= minimum, or the
+    SceneError that names it: 0 or a negative count would write a black image or zero gradients."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise SceneError(file, field, f"an integer of at least {minimum}, got {value!r}")
+    return int(value)
+
+
 @dataclass
 class Mesh:
     positions: np.ndarray  # (V, 3) float32, meters, +Y up

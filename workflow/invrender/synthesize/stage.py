@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import partial
 
+from ..scene.types import require_positive
 from .capture import _default_renderer, write_capture
 from .duplicates import make_duplicates
 from .room import make_room
@@ -18,6 +19,7 @@ def run(kind: str, out_dir, config: dict | None = None, spp: int = 64, seed: int
     ``seed`` (if given) overrides ``config["seed"]``; the same seed drives the scene and the
     render noise. Returns the scene's metadata.
     """
+    spp = require_positive("synthesize --spp", "samples per pixel", spp)
     if kind not in KINDS:
         raise ValueError(f"synthesize: kind: expected one of {sorted(KINDS)}, got {kind!r}")
     config = dict(config or {})
