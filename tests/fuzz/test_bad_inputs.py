@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from inputs import (gradient_inputs, good_camera, good_image, grid_mesh, render_inputs, transforms_doc,
                     write_colmap_binary, write_colmap_text, write_json, write_obj, write_ply)
-from stage_runs import check_property
+from fuzz_runs import check_property
 
 from invrender.render.analysis import unphysical_albedo
 from invrender.render.bsdf import directional_albedo, max_albedo

@@ -1,6 +1,6 @@
 """Fuzz suite over the stages' inputs (issue 10): meshes (geometry), cameras (cameras), capture
 images (gradients), scene directories (render) and instance masks (read_mask: no stage reads them
-yet). Every generated input must give the property of stage_runs.check_property: exit 0 with
+yet). Every generated input must give the property of fuzz_runs.check_property: exit 0 with
 finite outputs, or exit 2 with one line naming the file and the field.
 
 Two profiles, chosen by the environment variable INVRENDER_FUZZ:
@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from inputs import (gradient_inputs, grid_mesh, render_inputs, transforms_doc, write_colmap_binary,
                     write_colmap_text, write_json, write_obj, write_ply)
-from stage_runs import check_property
+from fuzz_runs import check_property
 
 from invrender.scene.images import read_mask
 from invrender.scene.types import SceneError

@@ -28,7 +28,7 @@ from ..scene.images import read_image
 from ..scene.mesh_io import read_obj_parts
 from ..scene.mtl import MtlMaterial, read_mtl
 from ..scene.packing import pack_scene
-from ..scene.types import Atlas, Mesh, SceneError, SceneObject
+from ..scene.types import Atlas, Mesh, SceneError, SceneObject, require_positive
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,8 @@ def run(source, out_dir, cameras=None, environment=None, cube_size: int = 64, em
     Mitsuba, Cycles and USD mesh lights emit from the front only) or "two". Returns a summary.
     """
     check_output(out_dir, "scene")  # before the work, not after it
+    cube_size = require_positive("import --cube-size", "texels", cube_size)
+    max_atlas = require_positive("import --max-atlas", "texels", max_atlas)
     source = Path(source)
     obj_files = sorted(source.glob("*.obj")) if source.is_dir() else [source]
     if not obj_files:

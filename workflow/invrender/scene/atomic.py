@@ -180,16 +180,28 @@ def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = Non
 
 @contextmanager
 def _signals_held():
-    """SIGINT and SIGTERM wait (blocked, not lost) until the block ends, then act as usual."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    blocked = threading.current_thread() is threading.main_thread()
-    if blocked:
-        previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    """SIGINT and SIGTERM that arrive during the block are recorded and acted on when it ends.
+
+    Python runs signal handlers in the main thread whichever thread the signal reached, so a
+    handler that only records is reliable in a process with other threads (PoCL's, execnet's);
+    blocking the signal with pthread_sigmask would hold it in this thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    previous = {signum: signal.signal(signum, lambda number, frame: pending.append(number))
+                for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        if blocked:
-            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if pending:
+            handler = previous[pending[0]]
+            if callable(handler):
+                handler(pending[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(pending[0])
 
 
 @contextmanager

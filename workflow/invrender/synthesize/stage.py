@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from ..scene.types import require_positive
+from ..scene.types import SceneError, require_positive
 from .capture import _default_renderer, write_capture
 from .duplicates import make_duplicates
 from .room import make_room
@@ -21,11 +21,14 @@ def run(kind: str, out_dir, config: dict | None = None, spp: int = 64, seed: int
     """
     spp = require_positive("synthesize --spp", "samples per pixel", spp)
     if kind not in KINDS:
-        raise ValueError(f"synthesize: kind: expected one of {sorted(KINDS)}, got {kind!r}")
+        raise SceneError("synthesize", "kind", f"one of {sorted(KINDS)}, got {kind!r}")
     config = dict(config or {})
     if seed is not None:
         config["seed"] = seed
-    scene, metadata = KINDS[kind](config)
+    try:
+        scene, metadata = KINDS[kind](config)
+    except ValueError as error:  # the generators name the config key and what they expected
+        raise SceneError("synthesize --config", f"{kind} generator", f"a scene it can build ({error})") from None
     factory = renderer_factory or partial(_default_renderer, device=device)
     write_capture(scene, metadata, out_dir, renderer_factory=factory, spp=spp, seed=metadata["seed"])
     return metadata
