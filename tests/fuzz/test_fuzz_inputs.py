@@ -26,7 +26,7 @@ from stage_runs import check_property
 from invrender.scene.images import read_mask
 from invrender.scene.types import SceneError
 
-settings.register_profile("fuzz-quick", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 6)),
+settings.register_profile("fuzz-quick", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 10)),
                           deadline=None, derandomize=True, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("fuzz-long", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 150)),
