@@ -200,6 +200,17 @@ def test_ordinary_materials_raise_no_albedo_warning():
     assert unphysical_albedo(Maps.uniform(size=(4, 4), kd=0.99, ks=0.0, ka=0.1)) is None
 
 
+@pytest.mark.parametrize("flags, field", [
+    (["--max-bounces", "-1"], "max_bounces"), (["--min-bounces", "5", "--max-bounces", "2"], "min_bounces"),
+    (["--bounce-fraction", "2"], "bounce_fraction"), (["--set", "nope=1"], "nope"),
+])
+def test_features_refuses_settings_outside_their_meaning(tmp_path, flags, field):
+    scene = render_inputs(tmp_path)
+    out = tmp_path / "features.json"
+    outcome = check_property(tmp_path, out, ["features", scene, "--out", out, *flags], False, ("features --",))
+    assert outcome.code == 2 and field in outcome.errors[0], outcome.errors
+
+
 def test_colmap_verify_params_names_the_cameras_file(tmp_path):
     write_colmap_text(tmp_path / "sparse", [(1, "PINHOLE", 32, 24, [30.0, 30.0])], [good_image()])
     outcome = cameras(tmp_path, tmp_path / "sparse", ("cameras.txt",))
