@@ -1,5 +1,5 @@
 """Fuzz suite over the stages' inputs (issue 10): meshes (geometry), cameras (cameras), capture
-images (gradients), scene directories (render) and instance masks (read_mask: no stage reads them
+images (gradients), scene directories (render, features, export) and instance masks (read_mask: no stage reads them
 yet). Every generated input must give the property of stage_runs.check_property: exit 0 with
 finite outputs, or exit 2 with one line naming the file and the field.
 
@@ -229,8 +229,8 @@ SCENE_KEYS = ["version", "mesh", "cameras", "maps", "maps.kd", "maps.kg", "metad
 @PROFILE
 @given(key=st.sampled_from(SCENE_KEYS), action=st.sampled_from(["delete", "replace"]),
        value=st.sampled_from([None, "", -1, 3, 1e308, "nope.exr", "../outside.ply", [], {}, True]),
-       nan_map=st.sampled_from([None, "kd", "ke", "kg"]))
-def test_fuzz_scene_directories_through_render(key, action, value, nan_map):
+       nan_map=st.sampled_from([None, "kd", "ke", "kg"]), stage=st.sampled_from(["render", "features", "export"]))
+def test_fuzz_scene_directories_through_render_features_export(key, action, value, nan_map, stage):
     from invrender.scene.images import write_exr
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -252,8 +252,10 @@ def test_fuzz_scene_directories_through_render(key, action, value, nan_map):
                 image = read_image(target)
                 image.reshape(-1)[0] = np.nan
                 write_exr(target, image)
-        out = root / "renders"
-        check_property(root, out, ["render", scene, "--out", out, "--spp", "1"], subprocess_run=False,
+        out = root / {"render": "renders", "features": "features.json", "export": "usd"}[stage]
+        extra = ["--spp", "1"] if stage == "render" else []
+        # export runs usd-core (native): in a subprocess
+        check_property(root, out, [stage, scene, "--out", out, *extra], subprocess_run=stage == "export",
                        names=("scene",))
 
 
