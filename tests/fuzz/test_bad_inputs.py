@@ -250,3 +250,16 @@ def test_a_mesh_a_few_millimetres_across_is_unwrapped(tmp_path):
     assert atlas["utilisation"] > 0.5, atlas
     # 64 texels across a 1 mm sheet, less the padding: about 60,000 texels per metre
     assert 4e4 < atlas["texel_density_per_m"] < 6.4e4, atlas
+
+
+def test_import_names_the_obj_file_of_a_far_vertex(tmp_path):
+    """Fuzz finding: `import` read OBJ parts unchecked, so a vertex at 1e30 was refused only when
+    the scene was written, naming "(scene in memory)" instead of the file."""
+    from objscene import write_room
+
+    files = write_room(tmp_path / "files", lambda path, radiance: write_exr(path, np.ones((8, 16, 3), np.float32)))
+    box = files / "box.obj"
+    box.write_text(box.read_text().replace("v -0.6 0.0 -0.9", "v -0.6 1e30 -0.9", 1))
+    out = tmp_path / "scene"
+    outcome = check_property(tmp_path, out, ["import", files, "--out", out, "--cube-size", "8"], True, ("box.obj",))
+    assert outcome.code == 2 and "extent" in outcome.errors[0], outcome.errors
