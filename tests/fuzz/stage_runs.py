@@ -111,6 +111,7 @@ def check_property(root: Path, out: Path, argv: list[str], subprocess_run: bool,
         line = outcome.errors[0]
         assert ": expected " in line and "\n" not in line, line
         assert not names or any(name in line for name in names), (names, line)
-        leftovers = [p.name for p in out.parent.iterdir() if p.name.startswith(out.name)]
+        # temporary outputs are named after the output, hidden (a leading dot) or not
+        leftovers = [p.name for p in out.parent.iterdir() if p.name.lstrip(".").startswith(out.name)]
         assert not leftovers, f"a failed run left {leftovers}"
     return outcome
