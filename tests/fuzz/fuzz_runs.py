@@ -10,6 +10,7 @@ in a subprocess with a timeout; the others run in-process through ``invrender.cl
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -45,18 +46,20 @@ def snapshot(root: Path, out: Path) -> dict:
 
 
 def run_stage(argv: list[str], log: Path, subprocess_run: bool) -> Outcome:
-    """``invrender --log LOG *argv``, in-process or in a subprocess bounded by TIMEOUT_S."""
+    """``invrender --log LOG *argv``, in-process or in a subprocess bounded by TIMEOUT_S, run from
+    the log's directory (so that a stray relative write lands where the snapshot sees it)."""
     argv = ["--log", str(log), *map(str, argv)]
     if subprocess_run:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(WORKFLOW), os.environ.get("PYTHONPATH", "")]))
         try:
             done = subprocess.run([sys.executable, "-m", "invrender.cli", *argv], capture_output=True, text=True,
-                                  timeout=TIMEOUT_S, env=env)
+                                  timeout=TIMEOUT_S, env=env, cwd=log.parent)
         except subprocess.TimeoutExpired:
             raise AssertionError(f"invrender {' '.join(argv)} ran past {TIMEOUT_S} s (a hang)") from None
         code, stderr = done.returncode, done.stderr
     else:
-        code, stderr = main(argv), ""
+        with contextlib.chdir(log.parent):
+            code, stderr = main(argv), ""
     lines = log.read_text().splitlines() if log.exists() else []
     errors = [line.split(" ERROR ", 1)[1] for line in lines if " ERROR " in line]
     return Outcome(code, errors, stderr)
@@ -108,6 +111,7 @@ def check_property(root: Path, out: Path, argv: list[str], subprocess_run: bool,
         line = outcome.errors[0]
         assert ": expected " in line and "\n" not in line, line
         assert not names or any(name in line for name in names), (names, line)
-        leftovers = [p.name for p in out.parent.iterdir() if p.name.startswith(out.name)]
+        # temporary outputs are named after the output, hidden (a leading dot) or not
+        leftovers = [p.name for p in out.parent.iterdir() if p.name.lstrip(".").startswith(out.name)]
         assert not leftovers, f"a failed run left {leftovers}"
     return outcome

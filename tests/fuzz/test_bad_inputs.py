@@ -34,7 +34,8 @@ def test_a_face_index_past_the_vertices_is_a_clear_error_not_a_segfault(tmp_path
     source = tmp_path / f"bad.{kind.split('_')[0]}"
     write_obj(source, positions, faces) if kind == "obj" else write_ply(source, positions, faces, kind == "ply_binary")
     error = geometry(tmp_path, source).errors[0]
-    assert "face 0" in error and "99999" in error or "99998" in error, error
+    # OBJ counts from 1 (the file's 99999), PLY from 0 (its 99998)
+    assert "face 0" in error and ("99999" if kind == "obj" else "99998") in error, error
 
 
 # ---------------------------------------------------------------------------- defect 6: degenerate scale
@@ -200,6 +201,17 @@ def test_ordinary_materials_raise_no_albedo_warning():
     assert unphysical_albedo(Maps.uniform(size=(4, 4), kd=0.99, ks=0.0, ka=0.1)) is None
 
 
+@pytest.mark.parametrize("flags, field", [
+    (["--max-bounces", "-1"], "max_bounces"), (["--min-bounces", "5", "--max-bounces", "2"], "min_bounces"),
+    (["--bounce-fraction", "2"], "bounce_fraction"), (["--set", "nope=1"], "nope"),
+])
+def test_features_refuses_settings_outside_their_meaning(tmp_path, flags, field):
+    scene = render_inputs(tmp_path)
+    out = tmp_path / "features.json"
+    outcome = check_property(tmp_path, out, ["features", scene, "--out", out, *flags], False, ("features --",))
+    assert outcome.code == 2 and field in outcome.errors[0], outcome.errors
+
+
 def test_colmap_verify_params_names_the_cameras_file(tmp_path):
     write_colmap_text(tmp_path / "sparse", [(1, "PINHOLE", 32, 24, [30.0, 30.0])], [good_image()])
     outcome = cameras(tmp_path, tmp_path / "sparse", ("cameras.txt",))
@@ -238,3 +250,16 @@ def test_a_mesh_a_few_millimetres_across_is_unwrapped(tmp_path):
     assert atlas["utilisation"] > 0.5, atlas
     # 64 texels across a 1 mm sheet, less the padding: about 60,000 texels per metre
     assert 4e4 < atlas["texel_density_per_m"] < 6.4e4, atlas
+
+
+def test_import_names_the_obj_file_of_a_far_vertex(tmp_path):
+    """Fuzz finding: `import` read OBJ parts unchecked, so a vertex at 1e30 was refused only when
+    the scene was written, naming "(scene in memory)" instead of the file."""
+    from objscene import write_room
+
+    files = write_room(tmp_path / "files", lambda path, radiance: write_exr(path, np.ones((8, 16, 3), np.float32)))
+    box = files / "box.obj"
+    box.write_text(box.read_text().replace("v -0.6 0.0 -0.9", "v -0.6 1e30 -0.9", 1))
+    out = tmp_path / "scene"
+    outcome = check_property(tmp_path, out, ["import", files, "--out", out, "--cube-size", "8"], True, ("box.obj",))
+    assert outcome.code == 2 and "extent" in outcome.errors[0], outcome.errors

@@ -1,5 +1,5 @@
 """Fuzz suite over the stages' inputs (issue 10): meshes (geometry), cameras (cameras), capture
-images (gradients), scene directories (render) and instance masks (read_mask: no stage reads them
+images (gradients), scene directories (render, features, export) and instance masks (read_mask: no stage reads them
 yet). Every generated input must give the property of fuzz_runs.check_property: exit 0 with
 finite outputs, or exit 2 with one line naming the file and the field.
 
@@ -26,7 +26,7 @@ from fuzz_runs import check_property
 from invrender.scene.images import read_mask
 from invrender.scene.types import SceneError
 
-settings.register_profile("fuzz-quick", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 6)),
+settings.register_profile("fuzz-quick", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 10)),
                           deadline=None, derandomize=True, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("fuzz-long", max_examples=int(os.environ.get("INVRENDER_FUZZ_EXAMPLES", 150)),
@@ -229,8 +229,8 @@ SCENE_KEYS = ["version", "mesh", "cameras", "maps", "maps.kd", "maps.kg", "metad
 @PROFILE
 @given(key=st.sampled_from(SCENE_KEYS), action=st.sampled_from(["delete", "replace"]),
        value=st.sampled_from([None, "", -1, 3, 1e308, "nope.exr", "../outside.ply", [], {}, True]),
-       nan_map=st.sampled_from([None, "kd", "ke", "kg"]))
-def test_fuzz_scene_directories_through_render(key, action, value, nan_map):
+       nan_map=st.sampled_from([None, "kd", "ke", "kg"]), stage=st.sampled_from(["render", "features", "export"]))
+def test_fuzz_scene_directories_through_render_features_export(key, action, value, nan_map, stage):
     from invrender.scene.images import write_exr
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -252,8 +252,10 @@ def test_fuzz_scene_directories_through_render(key, action, value, nan_map):
                 image = read_image(target)
                 image.reshape(-1)[0] = np.nan
                 write_exr(target, image)
-        out = root / "renders"
-        check_property(root, out, ["render", scene, "--out", out, "--spp", "1"], subprocess_run=False,
+        out = root / {"render": "renders", "features": "features.json", "export": "usd"}[stage]
+        extra = ["--spp", "1"] if stage == "render" else []
+        # export runs usd-core (native): in a subprocess
+        check_property(root, out, [stage, scene, "--out", out, *extra], subprocess_run=stage == "export",
                        names=("scene",))
 
 
@@ -278,3 +280,63 @@ def test_fuzz_instance_masks(depth, channels, cut, values):
             return
         assert channels == 1 and mask.dtype == np.uint16 and mask.shape == (8, 8)
         assert (mask == ids[..., 0]).all()
+
+
+# ---------------------------------------------------------------------------- textured OBJ files -> import
+
+
+IMPORT_FAULTS = ["none", "sky_nan", "sky_empty", "texture_truncated", "texture_missing", "mtl_kd_nan",
+                 "mtl_ke_negative", "obj_index", "obj_far_vertex", "obj_truncated", "camera_focal_0", "no_camera"]
+
+
+@PROFILE
+@given(fault=st.sampled_from(IMPORT_FAULTS), fraction=st.floats(0.05, 0.95))
+def test_fuzz_textured_obj_files_through_import(fault, fraction):
+    from objscene import write_room
+
+    from invrender.scene.cubemap import latlong_directions
+    from invrender.scene.images import write_exr
+
+    def write_sky(path, radiance):
+        sky = radiance(latlong_directions(32, 16)).astype(np.float32)
+        if fault == "sky_nan":
+            sky[int(fraction * 15), 3, 2] = np.nan
+        write_exr(path, sky)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        files = write_room(root / "files", write_sky)
+        box, mtl = files / "box.obj", files / "room.mtl"
+        if fault == "sky_empty":
+            (files / "sky.exr").write_bytes(b"")
+        elif fault == "texture_truncated":
+            truncate(files / "walls.png", fraction)
+        elif fault == "texture_missing":
+            (files / "floor.png").unlink()
+        elif fault == "mtl_kd_nan":
+            mtl.write_text(mtl.read_text().replace("Kd 0.7 0.3 0.2", "Kd nan 0.3 0.2"))
+        elif fault == "mtl_ke_negative":
+            mtl.write_text(mtl.read_text().replace("Ke 6 6 5", "Ke -6 6 5"))
+        elif fault == "obj_index":
+            box.write_text(box.read_text() + "f 1/1 2/2 99999/3\n")
+        elif fault == "obj_far_vertex":
+            box.write_text(box.read_text().replace("v -0.6 0.0 -0.9", "v -0.6 1e30 -0.9", 1))
+        elif fault == "obj_truncated":
+            truncate(box, fraction)
+        elif fault == "camera_focal_0":
+            text = (files / "sparse" / "cameras.txt").read_text().splitlines()
+            fields = text[-1].split()
+            (files / "sparse" / "cameras.txt").write_text("\n".join(text[:-1] + [" ".join(fields[:4] + ["0", "0"] + fields[6:])]) + "\n")
+        elif fault == "no_camera":
+            for f in (files / "sparse").iterdir():
+                f.unlink()
+            (files / "sparse").rmdir()
+        out = root / "scene"
+        outcome = check_property(root, out, ["import", files, "--out", out, "--environment", files / "sky.exr",
+                                             "--cube-size", "8", "--max-atlas", "256"], subprocess_run=True,
+                                 names=("files",))
+    if fault in ("sky_nan", "sky_empty", "texture_missing", "mtl_kd_nan", "obj_index", "obj_far_vertex",
+                 "camera_focal_0"):
+        assert outcome.code == 2, (fault, "accepted")
+    if fault == "none":
+        assert outcome.code == 0, outcome.errors

@@ -344,7 +344,9 @@ def read_obj_parts(path, require_uvs: bool = False) -> tuple[list[tuple[str, Mes
     for index, name in enumerate(parsed["materials"]):
         keep = parsed["polygon_material"] == index
         if keep.any():
-            parts.append((name, _obj_mesh(parsed, path, require_uvs, keep)))
+            mesh = _obj_mesh(parsed, path, require_uvs, keep)
+            validate_mesh(mesh, path, require_uvs)  # here, where the file can still be named
+            parts.append((name, mesh))
     return parts, parsed["mtllibs"]
 
 
