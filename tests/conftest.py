@@ -1,11 +1,14 @@
 """Shared by all tests: the helper modules under tests/ import by name, and kernel builds go to
 a cache private to the test session unless INVRENDER_CACHE says otherwise."""
 
-import os
 import sys
+from pathlib import Path
 
 import pytest
-from pathlib import Path
+
+# drjit's LLVM backend reads DRJIT_LIBLLVM_PATH: point it at a usable libLLVM
+# (invrender/mitsuba/llvm.py) before any test module imports drjit or mitsuba, in any order.
+import invrender.mitsuba.llvm  # noqa: E402, F401
 
 HERE = Path(__file__).parent
 for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_", HERE / "fuzz"):

@@ -11,8 +11,7 @@ from invrender.cli import main
 
 # A 2-view, 32 x 24 room: the smallest capture the synthesize stage makes.
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
-STAGES = ["synthesize", "cameras", "geometry", "gradients", "features", "render", "export", "import",
-          "import-usd"]
+STAGES = ["synthesize", "cameras", "geometry", "gradients", "features", "render", "export", "import", "import-usd"]
 
 
 def build_inputs(root: Path) -> Path:
@@ -20,8 +19,10 @@ def build_inputs(root: Path) -> Path:
     from objscene import write_room
 
     (root / "room.yaml").write_text(yaml.safe_dump(SMALL_ROOM))
-    assert main(["synthesize", "room", "--out", str(root / "capture"), "--config", str(root / "room.yaml"),
-                 "--spp", "4"]) == 0
+    assert (
+        main(["synthesize", "room", "--out", str(root / "capture"), "--config", str(root / "room.yaml"), "--spp", "4"])
+        == 0
+    )
     assert main(args("geometry", root, root / "geometry")) == 0
     assert main(args("export", root, root / "export")) == 0
     write_room(root / "objroom", lambda path, radiance: None)
@@ -35,8 +36,18 @@ def args(stage: str, root: Path, out: Path) -> list[str]:
         "synthesize": ["room", "--config", root / "room.yaml", "--spp", "4"],
         "cameras": [capture / "sparse"],
         "geometry": [capture / "mesh.ply", "--target-faces", "2000", "--atlas-resolution", "128"],
-        "gradients": ["--geometry", root / "geometry", "--cameras", capture / "sparse", "--images",
-                      capture / "images", "--spp", "1", "--batch", "256"],
+        "gradients": [
+            "--geometry",
+            root / "geometry",
+            "--cameras",
+            capture / "sparse",
+            "--images",
+            capture / "images",
+            "--spp",
+            "1",
+            "--batch",
+            "256",
+        ],
         "features": [scene],
         "render": [scene, "--spp", "1"],
         "export": [scene],

@@ -27,12 +27,27 @@ def sparse(tmp_path):
 def test_an_output_that_cannot_be_written_is_one_line(sparse, tmp_path):
     """/sys refuses new directories even to root (as a read-only parent does to a user)."""
     log = tmp_path / "run.log"
-    run = subprocess.run([sys.executable, "-m", "invrender.cli", "--log", str(log), "cameras", str(sparse),
-                          "--out", "/sys/invrender-test/out"], capture_output=True, text=True)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "invrender.cli",
+            "--log",
+            str(log),
+            "cameras",
+            str(sparse),
+            "--out",
+            "/sys/invrender-test/out",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
-    assert len(lines) == 1 and "/sys: output: expected a directory where /sys/invrender-test/out can be " \
-        "written" in lines[0], run.stderr
+    assert (
+        len(lines) == 1
+        and "/sys: output: expected a directory where /sys/invrender-test/out can be written" in lines[0]
+    ), run.stderr
     assert log.read_text().strip() == lines[0]
 
 
@@ -60,7 +75,8 @@ def test_a_bug_is_one_line_naming_the_log_which_has_the_traceback(sparse, tmp_pa
 
 def test_a_log_that_cannot_be_opened_is_one_line(sparse, tmp_path, capsys):
     (tmp_path / "file").write_text("x")
-    assert main(["--log", str(tmp_path / "file" / "run.log"), "cameras", str(sparse), "--out",
-                 str(tmp_path / "out")]) == 2
+    assert (
+        main(["--log", str(tmp_path / "file" / "run.log"), "cameras", str(sparse), "--out", str(tmp_path / "out")]) == 2
+    )
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("invrender: --log: ") and str(tmp_path / "file") in lines[0]

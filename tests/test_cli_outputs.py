@@ -17,8 +17,10 @@ def inputs(tmp_path_factory):
 
 def snapshot(root):
     """Every file under root: its bytes and mtime; every directory: its entries."""
-    return {p: (p.read_bytes(), p.stat().st_mtime_ns) if p.is_file() else sorted(q.name for q in p.iterdir())
-            for p in [root, *root.rglob("*")]}
+    return {
+        p: (p.read_bytes(), p.stat().st_mtime_ns) if p.is_file() else sorted(q.name for q in p.iterdir())
+        for p in [root, *root.rglob("*")]
+    }
 
 
 def sentinels(folder):
@@ -51,6 +53,12 @@ def test_a_stage_touches_nothing_but_its_output(stage, inputs, tmp_path, capsys)
         after = snapshot(folder) | snapshot(inputs)
         assert after.pop(folder) == sorted(before[folder] + [out.name])
         assert {p: v for p, v in after.items() if out not in (p, *p.parents)} == {
-            p: v for p, v in before.items() if p != folder}
-    assert out.is_file() if stage == "features" else (out / MARKER).read_text() == {
-        "synthesize": "capture", "render": "renders", "import": "scene", "import-usd": "scene"}.get(stage, stage) + "\n"
+            p: v for p, v in before.items() if p != folder
+        }
+    assert (
+        out.is_file()
+        if stage == "features"
+        else (out / MARKER).read_text()
+        == {"synthesize": "capture", "render": "renders", "import": "scene", "import-usd": "scene"}.get(stage, stage)
+        + "\n"
+    )

@@ -2,7 +2,6 @@
 jobs) exits 130 or 143 and leaves nothing half-written behind; after SIGKILL, which no process can
 answer, the next run of the stage sweeps what the killed one left (issue 10, defect 3)."""
 
-import os
 import signal
 import subprocess
 import sys
@@ -57,8 +56,16 @@ def out_path(folder: Path, stage: str) -> Path:
 def start_paused(stage: str, inputs: Path, folder: Path, log: Path) -> subprocess.Popen:
     folder.mkdir()
     out = out_path(folder, stage)
-    command = [sys.executable, "-c", PAUSED, str(folder.parent / f"{folder.name}.busy"), str(out),
-               "--log", str(log), *args(stage, inputs, out)]
+    command = [
+        sys.executable,
+        "-c",
+        PAUSED,
+        str(folder.parent / f"{folder.name}.busy"),
+        str(out),
+        "--log",
+        str(log),
+        *args(stage, inputs, out),
+    ]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
@@ -101,8 +108,11 @@ def test_signals_leave_nothing_and_the_next_run_sweeps_a_killed_one(stage, input
 def test_sigterm_mid_render_kernel_leaves_no_temporary_output(tmp_path):
     """Not paused: SIGTERM while the OpenCL render loop is busy (PoCL set up, pycolmap imported)."""
     out = tmp_path / "capture"
-    proc = subprocess.Popen([sys.executable, "-m", "invrender.cli", "synthesize", "room", "--out", str(out),
-                             "--spp", "100000"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "invrender.cli", "synthesize", "room", "--out", str(out), "--spp", "100000"],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+    )
     try:
         deadline = time.time() + 120
         while time.time() < deadline and not any(".tmp-" in p.name for p in tmp_path.iterdir()):

@@ -19,8 +19,11 @@ TEST_ONLY = {"mitsuba", "drjit"}  # the reference renderer: tests and benchmarks
 
 
 def top_level_units() -> set[str]:
-    return {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir()
-            if (p.is_dir() and (p / "__init__.py").exists()) or (p.is_file() and p.suffix == ".py")}
+    return {
+        p.stem if p.is_file() else p.name
+        for p in PACKAGE.iterdir()
+        if (p.is_dir() and (p / "__init__.py").exists()) or (p.is_file() and p.suffix == ".py")
+    }
 
 
 def unit_of(path: Path) -> str:
@@ -92,13 +95,16 @@ def test_every_stage_is_a_package_with_stage_run():
         assert "run" in names, f"{stage}/stage.py has no run"
 
 
-@pytest.mark.parametrize("unit, source, arrow", [
-    ("render", "from ..geometry import stage\n", "imports geometry"),  # library -> stage
-    ("scene", "def f():\n    from ..render.renderer import Renderer\n", "imports render"),  # lazy import
-    ("gradients", "from invrender.features.stage import run\n", "imports features"),  # stage -> stage
-    ("export", "from ..bench import harness\n", "imports bench"),  # production -> tooling
-    ("render", "import mitsuba as mi\n", "imports mitsuba (a test"),  # production -> reference renderer
-])
+@pytest.mark.parametrize(
+    "unit, source, arrow",
+    [
+        ("render", "from ..geometry import stage\n", "imports geometry"),  # library -> stage
+        ("scene", "def f():\n    from ..render.renderer import Renderer\n", "imports render"),  # lazy import
+        ("gradients", "from invrender.features.stage import run\n", "imports features"),  # stage -> stage
+        ("export", "from ..bench import harness\n", "imports bench"),  # production -> tooling
+        ("render", "import mitsuba as mi\n", "imports mitsuba (a test"),  # production -> reference renderer
+    ],
+)
 def test_a_new_arrow_is_caught(unit, source, arrow):
     path = PACKAGE / unit / "new_module.py"
     (found,) = violations([(path, source)])

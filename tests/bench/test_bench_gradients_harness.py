@@ -49,8 +49,18 @@ def test_equal_error_rows_against_mitsuba_prb(quick_run):
     assert all(_finite_positive(r["wall_s"]) for r in report["curves"])
     if not AD:  # invrender alone: test_without_an_ad_variant_invrender_is_measured_alone
         return
-    for key in ("target_rel_rmse", "t_invrender_s", "t_mitsuba_s", "ratio", "ratio_fit", "ratio_cpu", "speed_ratio",
-                "variance_ratio", "texel_mse_over_noise", "mean_rel_sigma"):
+    for key in (
+        "target_rel_rmse",
+        "t_invrender_s",
+        "t_mitsuba_s",
+        "ratio",
+        "ratio_fit",
+        "ratio_cpu",
+        "speed_ratio",
+        "variance_ratio",
+        "texel_mse_over_noise",
+        "mean_rel_sigma",
+    ):
         assert _finite_positive(row[key]), (key, row[key])
     assert row["ref_noise_rel_rmse"] < row["target_rel_rmse"]
     assert row["agreement"] == "not checked"  # quick references are far below the spp it takes to judge
@@ -64,7 +74,8 @@ def test_memory_and_accumulation_rows(quick_run):
     modes = ("fixed", "buckets") if has_accumulation() else ("fixed",)
     rows = report["memory"]
     assert [(r["renderer"], r["accumulation"]) for r in rows] == [("invrender", m) for m in modes] + [
-        ("mitsuba llvm_ad_rgb prb", "-")] * AD
+        ("mitsuba llvm_ad_rgb prb", "-")
+    ] * AD
     for r in rows:
         assert r["rays"] == QUICK.memory_side**2 and r["bounces"] == QUICK.memory_bounces
         assert _finite_positive(r["rss_after_setup_mb"]) and r["peak_rss_mb"] >= r["rss_after_setup_mb"]

@@ -47,13 +47,22 @@ def test_equal_rmse_rows_for_3_and_10_bounces(quick_run):
     rows = report["equal_rmse"]
     assert [row["bounces"] for row in rows] == [3, 10]
     for row in rows:
-        for key in ("target_rmse", "t_invrender_s", "t_mitsuba_s", "ratio", "ratio_fit", "speed_ratio",
-                    "variance_ratio", "ref_noise_rmse"):
+        for key in (
+            "target_rmse",
+            "t_invrender_s",
+            "t_mitsuba_s",
+            "ratio",
+            "ratio_fit",
+            "speed_ratio",
+            "variance_ratio",
+            "ref_noise_rmse",
+        ):
             assert _finite_positive(row[key]), (key, row[key])
         assert row["ref_noise_rmse"] < row["target_rmse"]
         assert math.isfinite(row["mean_rel_diff"])
     assert {(r["bounces"], r["renderer"]) for r in report["curves"]} == {
-        (b, n) for b in (3, 10) for n in ("invrender", "mitsuba")}
+        (b, n) for b in (3, 10) for n in ("invrender", "mitsuba")
+    }
     assert len(report["one_time"]) == 4
     settings = QUICK if report["mitsuba_variant"] == "llvm_ad_rgb" else scalar_settings(QUICK)
     assert [row["width"] for row in rows] == [settings.width] * 2

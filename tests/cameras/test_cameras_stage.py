@@ -14,8 +14,15 @@ def test_transforms_json_becomes_a_colmap_text_model_that_projects_the_same(tmp_
     # on the principal point, one 1 m to the right at x = cx + f / 3.
     c2w = np.eye(4)
     c2w[2, 3] = 3.0
-    doc = {"fl_x": 300, "fl_y": 300, "cx": 32, "cy": 24, "w": 64, "h": 48,
-           "frames": [{"file_path": "images/a.png", "transform_matrix": c2w.tolist()}]}
+    doc = {
+        "fl_x": 300,
+        "fl_y": 300,
+        "cx": 32,
+        "cy": 24,
+        "w": 64,
+        "h": 48,
+        "frames": [{"file_path": "images/a.png", "transform_matrix": c2w.tolist()}],
+    }
     (tmp_path / "transforms.json").write_text(json.dumps(doc))
     out = tmp_path / "cameras"
     assert main(["cameras", str(tmp_path / "transforms.json"), "--out", str(out)]) == 0

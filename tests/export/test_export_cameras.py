@@ -64,7 +64,9 @@ def test_usd_camera_projects_like_colmap_to_a_hundredth_of_a_pixel(name):
     corners = np.array([[0, 0], [camera.width, camera.height]], float)  # the film edges are the image edges
     (fx, fy), (cx, cy) = camera.focal, camera.principal_point
     rays = np.stack([(corners[:, 0] - cx) / fx, (corners[:, 1] - cy) / fy, np.ones(2)], axis=1) * 3.0
-    assert np.abs(_project_with_gf(usd, (rays - camera.t) @ camera.R, camera.width, camera.height) - corners).max() < 0.01
+    assert (
+        np.abs(_project_with_gf(usd, (rays - camera.t) @ camera.R, camera.width, camera.height) - corners).max() < 0.01
+    )
 
 
 def test_opencv_camera_exports_its_pinhole_part_with_a_warning(caplog):
@@ -74,9 +76,14 @@ def test_opencv_camera_exports_its_pinhole_part_with_a_warning(caplog):
     assert "distortion" in caplog.text and "pinhole part" in caplog.text
     points = _points_in_view(camera)
     pinhole = Camera(camera.name, "PINHOLE", camera.width, camera.height, camera.params[:4], camera.R, camera.t)
-    assert np.abs(_project_with_gf(usd, points, camera.width, camera.height) - project_points(pinhole, points)).max() < 0.01
+    assert (
+        np.abs(_project_with_gf(usd, points, camera.width, camera.height) - project_points(pinhole, points)).max()
+        < 0.01
+    )
     # ... while the distorted projection is what it is not: the check above can fail
-    assert np.abs(_project_with_gf(usd, points, camera.width, camera.height) - project_points(camera, points)).max() > 0.5
+    assert (
+        np.abs(_project_with_gf(usd, points, camera.width, camera.height) - project_points(camera, points)).max() > 0.5
+    )
 
 
 @pytest.mark.parametrize("name", sorted(CAMERAS))

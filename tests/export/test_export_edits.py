@@ -48,12 +48,14 @@ def test_a_moved_instance_moves_and_nothing_else_does(edited, demo_dirs, tmp_pat
     shift = back.mesh.positions - original.mesh.positions
     assert np.allclose(shift[moved], [0.1, 0.0, -0.05], atol=1e-6)
     assert np.abs(shift[~moved]).max() < 1e-7
+
     def pose_of(directory):
         instances = read_scene_json(directory)["metadata"]["poses"]["instances"]
         return np.asarray(next(p for p in instances if p["instance_id"] == 3)["T_obj2world"])
 
-    assert np.allclose(pose_of(tmp_path / "imported")[:3, 3] - pose_of(demo_dirs["cans"])[:3, 3], [0.1, 0.0, -0.05],
-                       atol=1e-12)  # the pose follows, so the next export instances it there
+    assert np.allclose(
+        pose_of(tmp_path / "imported")[:3, 3] - pose_of(demo_dirs["cans"])[:3, 3], [0.1, 0.0, -0.05], atol=1e-12
+    )  # the pose follows, so the next export instances it there
 
 
 def test_a_changed_material_is_baked_under_its_faces_only(edited, demo_dirs, tmp_path):

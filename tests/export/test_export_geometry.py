@@ -68,8 +68,12 @@ def _copies(poses, jitter=0.0):
         faces.append(obj_faces + sum(len(p) for p in positions[:-1]))
         ids += [k] * 3
         uvs.append(np.linspace(0, 1, 8).reshape(4, 2))
-    return Mesh(np.concatenate(positions).astype(np.float32), np.concatenate(faces).astype(np.int32),
-                np.concatenate(uvs).astype(np.float32), np.array(ids, np.int32))
+    return Mesh(
+        np.concatenate(positions).astype(np.float32),
+        np.concatenate(faces).astype(np.int32),
+        np.concatenate(uvs).astype(np.float32),
+        np.array(ids, np.int32),
+    )
 
 
 def _pose(angle, t):
@@ -102,5 +106,9 @@ def test_poses_must_be_rigid_transforms():
     scaled = np.diag([2.0, 2.0, 2.0, 1.0])
     with pytest.raises(SceneError, match="T_obj2world"):
         validate_poses({"instances": [{"instance_id": 1, "T_obj2world": scaled.tolist()}]}, "poses.json")
-    assert validate_poses({"instances": [{"instance_id": 1, "registered": False, "T_obj2world": np.eye(4).tolist()}]},
-                       "poses.json") == []
+    assert (
+        validate_poses(
+            {"instances": [{"instance_id": 1, "registered": False, "T_obj2world": np.eye(4).tolist()}]}, "poses.json"
+        )
+        == []
+    )

@@ -6,8 +6,13 @@ import numpy as np
 import pytest
 
 from invrender.export.lights import latlong_size, mean_radiance
-from invrender.scene.cubemap import (cube_texel_solid_angles, cube_to_direction, cube_to_latlong, direction_to_cube,
-                                     latlong_to_cube)
+from invrender.scene.cubemap import (
+    cube_texel_solid_angles,
+    cube_to_direction,
+    cube_to_latlong,
+    direction_to_cube,
+    latlong_to_cube,
+)
 from invrender.scene.types import Maps, Mesh
 
 
@@ -18,13 +23,20 @@ def _one_bright_texel(direction, n=8):
     return kg
 
 
-@pytest.mark.parametrize("direction, where", [
-    # UsdLux DomeLight / OpenEXR: latitude +pi/2 (top row) is +Y; latitude 0, longitude 0 is +Z
-    # (the image centre); longitude pi/2 is +X (a quarter from the left); longitude +-pi is -Z
-    # (the left and right edges).
-    ((0, 1, 0), (0.0, None)), ((0, -1, 0), (1.0, None)), ((0, 0, 1), (0.5, 0.5)),
-    ((1, 0, 0), (0.5, 0.25)), ((-1, 0, 0), (0.5, 0.75)), ((0, 0, -1), (0.5, 0.0)),
-])
+@pytest.mark.parametrize(
+    "direction, where",
+    [
+        # UsdLux DomeLight / OpenEXR: latitude +pi/2 (top row) is +Y; latitude 0, longitude 0 is +Z
+        # (the image centre); longitude pi/2 is +X (a quarter from the left); longitude +-pi is -Z
+        # (the left and right edges).
+        ((0, 1, 0), (0.0, None)),
+        ((0, -1, 0), (1.0, None)),
+        ((0, 0, 1), (0.5, 0.5)),
+        ((1, 0, 0), (0.5, 0.25)),
+        ((-1, 0, 0), (0.5, 0.75)),
+        ((0, 0, -1), (0.5, 0.0)),
+    ],
+)
 def test_latlong_orientation_is_the_usdlux_one(direction, where):
     image = cube_to_latlong(_one_bright_texel(direction), *latlong_size(8))
     height, width = image.shape[:2]
@@ -97,11 +109,14 @@ def test_mean_radiance_is_the_area_weighted_mean_of_the_texels_under_the_faces()
     assert np.allclose(mean_radiance(mesh, maps, np.array([1])), 6.0)
 
 
-@pytest.mark.parametrize("schema, up, zenith", [
-    ("DomeLight", "Y", (0, 1, 0)),  # the export's own form
-    ("DomeLight_1", "Z", (0, 1, 0)),  # pole on the stage's up axis (poleAxis "scene"), Z up -> our +Y
-    ("DomeLight", "Z", (0, 0, -1)),  # DomeLight's pole is the stage's +Y whatever its up axis
-])
+@pytest.mark.parametrize(
+    "schema, up, zenith",
+    [
+        ("DomeLight", "Y", (0, 1, 0)),  # the export's own form
+        ("DomeLight_1", "Z", (0, 1, 0)),  # pole on the stage's up axis (poleAxis "scene"), Z up -> our +Y
+        ("DomeLight", "Z", (0, 0, -1)),  # DomeLight's pole is the stage's +Y whatever its up axis
+    ],
+)
 def test_imported_dome_puts_its_pole_where_usdlux_says(tmp_path, schema, up, zenith):
     """A sky bright within 29.5 degrees of the lat-long's pole (its top 30 rows) lights the cube
     texels wholly within 29.5 degrees of where the pole must end up in our world fully, those wholly
@@ -122,9 +137,17 @@ def test_imported_dome_puts_its_pole_where_usdlux_says(tmp_path, schema, up, zen
     dome.CreateTextureFileAttr("./sky.exr")
     n = 16
     kg = read_dome(dome.GetPrim(), stage_to_scene(stage), n, "test")
-    corners = np.stack([cube_to_direction(np.arange(6)[:, None, None], (np.arange(n)[None, None, :] + ds) / n,
-                                          (np.arange(n)[None, :, None] + dt) / n)
-                        for ds in (0, 1) for dt in (0, 1)])  # (4, 6, N, N, 3)
+    corners = np.stack(
+        [
+            cube_to_direction(
+                np.arange(6)[:, None, None],
+                (np.arange(n)[None, None, :] + ds) / n,
+                (np.arange(n)[None, :, None] + dt) / n,
+            )
+            for ds in (0, 1)
+            for dt in (0, 1)
+        ]
+    )  # (4, 6, N, N, 3)
     angle = np.degrees(np.arccos(np.clip(corners @ np.asarray(zenith, float), -1, 1)))
     inside, outside = np.all(angle < 29.5, axis=0), np.all(angle > 29.5, axis=0)
     assert inside.sum() > 20 and np.allclose(kg[inside], 1.0, atol=1e-5)

@@ -3,8 +3,15 @@
 import numpy as np
 import pytest
 
-from invrender.export.roughness import (KA_MIN, _half_vector_grid, beckmann_d, ggx_d, ka_from_roughness,
-                                        mapping_error, roughness_from_ka)
+from invrender.export.roughness import (
+    KA_MIN,
+    _half_vector_grid,
+    beckmann_d,
+    ggx_d,
+    ka_from_roughness,
+    mapping_error,
+    roughness_from_ka,
+)
 
 
 def test_mapping_keeps_alpha_and_inverts_within_float32():
@@ -24,11 +31,14 @@ def test_the_quadrature_integrates_both_distributions_to_one(alpha):
     assert (ggx_d(h[:, 2], alpha) * h[:, 2]) @ weight == pytest.approx(1.0, abs=1e-5)
 
 
-@pytest.mark.parametrize("ka, angle, albedo_ours, albedo_usd, l1", [
-    (0.02, 0, 1.000, 0.975, 0.38),  # the glossy table of the demo room
-    (0.3, 0, 0.849, 0.641, 0.26),  # its walls and floor
-    (0.3, 60, 0.881, 0.656, 0.53),
-])
+@pytest.mark.parametrize(
+    "ka, angle, albedo_ours, albedo_usd, l1",
+    [
+        (0.02, 0, 1.000, 0.975, 0.38),  # the glossy table of the demo room
+        (0.3, 0, 0.849, 0.641, 0.26),  # its walls and floor
+        (0.3, 60, 0.881, 0.656, 0.53),
+    ],
+)
 def test_the_mapping_error_is_what_the_docs_say(ka, angle, albedo_ours, albedo_usd, l1):
     error = mapping_error(ka, np.radians(angle))
     assert error["albedo_ours"] == pytest.approx(albedo_ours, abs=2e-3)

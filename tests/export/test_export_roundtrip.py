@@ -79,7 +79,9 @@ def test_instanced_round_trip_is_within_a_float32_rounding(demo_dirs, demo_expor
     assert psnr(a, b) > 90.0
     # without instancing the copies are plain meshes and come back exactly
     export_usd(demo_dirs["cans"], tmp_path / "plain", instancing=False)
-    plain = load_scene(import_usd(tmp_path / "plain" / "scene.usda", tmp_path / "plain_back") and tmp_path / "plain_back")
+    plain = load_scene(
+        import_usd(tmp_path / "plain" / "scene.usda", tmp_path / "plain_back") and tmp_path / "plain_back"
+    )
     assert np.array_equal(plain.mesh.positions, original.mesh.positions)
     [c] = _renders(plain)
     assert np.array_equal(a, c)
@@ -95,7 +97,9 @@ def test_standard_view_of_the_room_measured(demo_exports, baselines, tmp_path):
     """What a UsdPreviewSurface / UsdLux tool gets: ka from roughness^4 (float32: a rounding, not a
     lobe change; the GGX lobe itself is roughness.py's), no kw, the lamps at their uniform mean
     radiance, pinhole cameras from the lens. Window openings show the dome, as ours do."""
-    back = load_scene(import_usd(demo_exports["room"] / "scene.usda", tmp_path / "std", exact=False) and tmp_path / "std")
+    back = load_scene(
+        import_usd(demo_exports["room"] / "scene.usda", tmp_path / "std", exact=False) and tmp_path / "std"
+    )
     original = baselines["room"]
     assert np.abs(back.maps.ka - original.maps.ka).max() <= 1e-6 * original.maps.ka.max()
     lamps = original.maps.ke.max(axis=-1) > 0

@@ -27,8 +27,12 @@ def test_the_validators_find_errors_where_there_are_some(tmp_path):
     """The check is not vacuous: it runs the stage-metadata, composition and reference checks, and a
     stage without units, up axis or default prim, with a missing texture, fails it."""
     names = {v.GetMetadata().name for v in validators()}
-    assert {"usdGeomValidators:StageMetadataChecker", "usdValidation:StageMetadataChecker",
-            "usdUtilsValidators:MissingReferenceValidator", "usdShadeValidators:ShaderSdrCompliance"} <= names
+    assert {
+        "usdGeomValidators:StageMetadataChecker",
+        "usdValidation:StageMetadataChecker",
+        "usdUtilsValidators:MissingReferenceValidator",
+        "usdShadeValidators:ShaderSdrCompliance",
+    } <= names
     stage = Usd.Stage.CreateNew(str(tmp_path / "bad.usda"))
     UsdGeom.Xform.Define(stage, "/World")
     shader = UsdShade.Shader.Define(stage, "/World/Looks/m/tex")

@@ -49,8 +49,12 @@ def test_objects_are_prims_with_their_transforms_and_instances_share_a_prototype
             material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
             shader = UsdShade.Shader(stage.GetPrimAtPath(material.GetPath().AppendChild("kd")))
             bound[str(prim.GetPath()).split("/")[3]] = shader.GetInput("file").Get().path
-    assert bound == {"room": "./textures/walls/kd.exr", "table": "./textures/wood/kd.exr",
-                     "cube_a": "./textures/paint/kd.exr", "cube_b": "./textures/paint/kd.exr"}
+    assert bound == {
+        "room": "./textures/walls/kd.exr",
+        "table": "./textures/wood/kd.exr",
+        "cube_a": "./textures/paint/kd.exr",
+        "cube_b": "./textures/paint/kd.exr",
+    }
 
 
 @pytest.mark.parametrize("layer", ["scene.usda", "scene.usdc"])
@@ -60,8 +64,12 @@ def test_v2_round_trip_is_exact_and_renders_identically(exported, tmp_path, laye
     original, back = load_scene(root / "scene"), load_scene(tmp_path / "back")
     assert back.version == 2 and back.objects[2].mesh is back.objects[3].mesh
     for a, b in zip(original.objects, back.objects, strict=True):
-        assert (a.name, a.material, a.instance_id, a.emission_sides) == (b.name, b.material, b.instance_id,
-                                                                          b.emission_sides)
+        assert (a.name, a.material, a.instance_id, a.emission_sides) == (
+            b.name,
+            b.material,
+            b.instance_id,
+            b.emission_sides,
+        )
         assert np.array_equal(a.transform, b.transform), a.name
         for field in ("positions", "faces", "uvs"):
             assert np.array_equal(getattr(a.mesh, field), getattr(b.mesh, field)), (a.name, field)

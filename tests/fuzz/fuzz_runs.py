@@ -52,8 +52,14 @@ def run_stage(argv: list[str], log: Path, subprocess_run: bool) -> Outcome:
     if subprocess_run:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(WORKFLOW), os.environ.get("PYTHONPATH", "")]))
         try:
-            done = subprocess.run([sys.executable, "-m", "invrender.cli", *argv], capture_output=True, text=True,
-                                  timeout=TIMEOUT_S, env=env, cwd=log.parent)
+            done = subprocess.run(
+                [sys.executable, "-m", "invrender.cli", *argv],
+                capture_output=True,
+                text=True,
+                timeout=TIMEOUT_S,
+                env=env,
+                cwd=log.parent,
+            )
         except subprocess.TimeoutExpired:
             raise AssertionError(f"invrender {' '.join(argv)} ran past {TIMEOUT_S} s (a hang)") from None
         code, stderr = done.returncode, done.stderr
@@ -88,7 +94,9 @@ def _fail(message):
     raise AssertionError(message)
 
 
-def check_property(root: Path, out: Path, argv: list[str], subprocess_run: bool, names: tuple[str, ...] = ()) -> Outcome:
+def check_property(
+    root: Path, out: Path, argv: list[str], subprocess_run: bool, names: tuple[str, ...] = ()
+) -> Outcome:
     """Run one stage on inputs under ``root`` writing ``out``, and assert the property. ``names``:
     words of which the error line must contain one (the input file or directory names)."""
     log = root / "run.log"

@@ -37,12 +37,20 @@ def write_obj(path: Path, positions, faces) -> None:
 def write_ply(path: Path, positions, faces, binary: bool) -> None:
     """x, y, z (float32) and vertex_indices, written by hand (indices as given, even if wrong)."""
     positions, faces = np.asarray(positions, np.float32), np.asarray(faces, np.int64)
-    header = ["ply", f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
-              f"element vertex {len(positions)}", "property float x", "property float y", "property float z",
-              f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
+    header = [
+        "ply",
+        f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
+        f"element vertex {len(positions)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        f"element face {len(faces)}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
     if binary:
         body = positions.astype("<f4").tobytes()
-        body += b"".join(struct.pack("<B3i", 3, *(int(np.clip(i, -2**31, 2**31 - 1)) for i in f)) for f in faces)
+        body += b"".join(struct.pack("<B3i", 3, *(int(np.clip(i, -(2**31), 2**31 - 1)) for i in f)) for f in faces)
         Path(path).write_bytes(("\n".join(header) + "\n").encode() + body)
     else:
         lines = [" ".join(repr(float(c)) for c in p) for p in positions.tolist()]
@@ -53,11 +61,17 @@ def write_ply(path: Path, positions, faces, binary: bool) -> None:
 def write_colmap_text(directory: Path, cameras: list[tuple], images: list[tuple]) -> None:
     """cameras: (id, model, width, height, params); images: (id, qvec wxyz, tvec, camera id, name)."""
     directory.mkdir(parents=True, exist_ok=True)
-    (directory / "cameras.txt").write_text("".join(
-        f"{i} {model} {w} {h} {' '.join(repr(float(p)) for p in params)}\n" for i, model, w, h, params in cameras))
-    (directory / "images.txt").write_text("".join(
-        f"{i} {' '.join(repr(float(q)) for q in qvec)} {' '.join(repr(float(t)) for t in tvec)} {cam} {name}\n\n"
-        for i, qvec, tvec, cam, name in images))
+    (directory / "cameras.txt").write_text(
+        "".join(
+            f"{i} {model} {w} {h} {' '.join(repr(float(p)) for p in params)}\n" for i, model, w, h, params in cameras
+        )
+    )
+    (directory / "images.txt").write_text(
+        "".join(
+            f"{i} {' '.join(repr(float(q)) for q in qvec)} {' '.join(repr(float(t)) for t in tvec)} {cam} {name}\n\n"
+            for i, qvec, tvec, cam, name in images
+        )
+    )
     (directory / "points3D.txt").write_text("")
 
 
@@ -85,8 +99,15 @@ def good_image(name: str = "view.png") -> tuple:
 
 def transforms_doc(fl_x=30.0, cx=16.0, matrix=None, w=32, h=24) -> dict:
     matrix = np.eye(4).tolist() if matrix is None else matrix
-    return {"fl_x": fl_x, "fl_y": fl_x, "cx": cx, "cy": h / 2, "w": w, "h": h,
-            "frames": [{"file_path": "view.png", "transform_matrix": matrix}]}
+    return {
+        "fl_x": fl_x,
+        "fl_y": fl_x,
+        "cx": cx,
+        "cy": h / 2,
+        "w": w,
+        "h": h,
+        "frames": [{"file_path": "view.png", "transform_matrix": matrix}],
+    }
 
 
 def write_json(path: Path, doc) -> None:

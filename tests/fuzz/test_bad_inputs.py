@@ -6,9 +6,20 @@ import json
 
 import numpy as np
 import pytest
-from inputs import (gradient_inputs, good_camera, good_image, grid_mesh, render_inputs, transforms_doc,
-                    write_colmap_binary, write_colmap_text, write_json, write_obj, write_ply)
 from fuzz_runs import check_property
+from inputs import (
+    good_camera,
+    good_image,
+    gradient_inputs,
+    grid_mesh,
+    render_inputs,
+    transforms_doc,
+    write_colmap_binary,
+    write_colmap_text,
+    write_json,
+    write_obj,
+    write_ply,
+)
 
 from invrender.render.analysis import unphysical_albedo
 from invrender.render.bsdf import directional_albedo, max_albedo
@@ -18,8 +29,13 @@ from invrender.scene.types import Maps
 
 def geometry(tmp_path, source, expect_code=2, names=()):
     out = tmp_path / "out"
-    outcome = check_property(tmp_path, out, ["geometry", source, "--out", out, "--atlas-resolution", "64"],
-                             subprocess_run=True, names=names or (source.name,))
+    outcome = check_property(
+        tmp_path,
+        out,
+        ["geometry", source, "--out", out, "--atlas-resolution", "64"],
+        subprocess_run=True,
+        names=names or (source.name,),
+    )
     assert outcome.code == expect_code, outcome.errors
     return outcome
 
@@ -81,12 +97,15 @@ def cameras(tmp_path, source, names):
 
 
 @pytest.mark.parametrize("writer", [write_colmap_text, write_colmap_binary])
-@pytest.mark.parametrize("params, field", [
-    ([0.0, 0.0, 16.0, 12.0], "focal length"),  # the report's camera
-    ([-30.0, 30.0, 16.0, 12.0], "focal length"),
-    ([30.0, 30.0, 500.0, 12.0], "principal point"),
-    ([30.0, 30.0, float("nan"), 12.0], "params"),
-])
+@pytest.mark.parametrize(
+    "params, field",
+    [
+        ([0.0, 0.0, 16.0, 12.0], "focal length"),  # the report's camera
+        ([-30.0, 30.0, 16.0, 12.0], "focal length"),
+        ([30.0, 30.0, 500.0, 12.0], "principal point"),
+        ([30.0, 30.0, float("nan"), 12.0], "params"),
+    ],
+)
 def test_a_camera_that_cannot_image_is_refused_naming_file_camera_and_field(tmp_path, writer, params, field):
     writer(tmp_path / "sparse", [(1, "PINHOLE", 32, 24, params)], [good_image()])
     outcome = cameras(tmp_path, tmp_path / "sparse", ("cameras.txt", "cameras.bin"))
@@ -101,12 +120,15 @@ def test_a_non_finite_pose_is_refused(tmp_path):
     assert outcome.code == 2, outcome
 
 
-@pytest.mark.parametrize("doc, field", [
-    (transforms_doc(fl_x=0.0), "fl_x"),
-    (transforms_doc(cx=-100.0), "principal point"),
-    (transforms_doc(matrix=np.diag([1.0, 1.0, -1.0, 1.0]).tolist()), "transform_matrix"),  # det -1
-    (transforms_doc(matrix=(2 * np.eye(4)).tolist()), "transform_matrix"),  # scale
-])
+@pytest.mark.parametrize(
+    "doc, field",
+    [
+        (transforms_doc(fl_x=0.0), "fl_x"),
+        (transforms_doc(cx=-100.0), "principal point"),
+        (transforms_doc(matrix=np.diag([1.0, 1.0, -1.0, 1.0]).tolist()), "transform_matrix"),  # det -1
+        (transforms_doc(matrix=(2 * np.eye(4)).tolist()), "transform_matrix"),  # scale
+    ],
+)
 def test_transforms_json_cameras_are_checked_alike(tmp_path, doc, field):
     write_json(tmp_path / "transforms.json", doc)
     outcome = cameras(tmp_path, tmp_path / "transforms.json", ("transforms.json",))
@@ -135,8 +157,27 @@ def test_a_non_finite_capture_pixel_is_refused_naming_file_and_pixel(tmp_path, v
     image[2, 3, 1] = value
     write_exr(images / "view.exr", image)
     out = tmp_path / "gradients"
-    outcome = check_property(tmp_path, out, ["gradients", "--geometry", geometry_dir, "--cameras", sparse, "--images",
-                                             images, "--out", out, "--spp", "1", "--batch", "64"], False, ("view.exr",))
+    outcome = check_property(
+        tmp_path,
+        out,
+        [
+            "gradients",
+            "--geometry",
+            geometry_dir,
+            "--cameras",
+            sparse,
+            "--images",
+            images,
+            "--out",
+            out,
+            "--spp",
+            "1",
+            "--batch",
+            "64",
+        ],
+        False,
+        ("view.exr",),
+    )
     assert outcome.code == 2 and "pixel (x 3, y 2) channel 1" in outcome.errors[0], outcome.errors
 
 
@@ -201,10 +242,15 @@ def test_ordinary_materials_raise_no_albedo_warning():
     assert unphysical_albedo(Maps.uniform(size=(4, 4), kd=0.99, ks=0.0, ka=0.1)) is None
 
 
-@pytest.mark.parametrize("flags, field", [
-    (["--max-bounces", "-1"], "max_bounces"), (["--min-bounces", "5", "--max-bounces", "2"], "min_bounces"),
-    (["--bounce-fraction", "2"], "bounce_fraction"), (["--set", "nope=1"], "nope"),
-])
+@pytest.mark.parametrize(
+    "flags, field",
+    [
+        (["--max-bounces", "-1"], "max_bounces"),
+        (["--min-bounces", "5", "--max-bounces", "2"], "min_bounces"),
+        (["--bounce-fraction", "2"], "bounce_fraction"),
+        (["--set", "nope=1"], "nope"),
+    ],
+)
 def test_features_refuses_settings_outside_their_meaning(tmp_path, flags, field):
     scene = render_inputs(tmp_path)
     out = tmp_path / "features.json"

@@ -53,12 +53,15 @@ def test_points_without_faces_or_normals_are_refused(tmp_path):
     assert error.value.expected.startswith("a mesh with faces, or a point cloud with normals")
 
 
-@pytest.mark.parametrize("name, content, field", [
-    ("empty.ply", b"", "(file)"),
-    ("empty.obj", b"", "(file)"),
-    ("garbage.ply", b"hello\n", "(file)"),
-    ("mesh.stl", b"solid x\n", "(file name)"),
-])
+@pytest.mark.parametrize(
+    "name, content, field",
+    [
+        ("empty.ply", b"", "(file)"),
+        ("empty.obj", b"", "(file)"),
+        ("garbage.ply", b"hello\n", "(file)"),
+        ("mesh.stl", b"solid x\n", "(file name)"),
+    ],
+)
 def test_empty_unreadable_and_unknown_files_are_refused(tmp_path, name, content, field):
     path = tmp_path / name
     path.write_bytes(content)
@@ -108,21 +111,25 @@ def test_clean_mesh_reports_what_it_removed():
     a, b = f[0, 0], f[0, 1]
     middle = 0.5 * (v[a] + v[b])
     fin_tips = [middle * 1.02, middle * 0.98]  # 2% of the radius out and in: crumbs, not surface
-    extra_v = np.vstack([
-        v[:10],                                               # n .. n+9: duplicates of 0..9
-        [[5, 5, 5], [5, 5, 5.01], [5, 5.01, 5]],              # n+10..n+12: the island
-        fin_tips,                                             # n+13, n+14: small fins on an edge
-        [[9, 9, 9], [8, 8, 8], [7, 7, 7]],                    # n+15..n+17: unreferenced
-        [[0.1, 0.2, 0.3]] * 3,                                # n+18..n+20: coincident corners
-        [[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [0.4, 0.4, 0.4]],  # n+21..n+23: collinear corners
-    ])
-    extra_f = np.vstack([
-        f[:5],                                                # duplicate faces
-        [[n + 10, n + 11, n + 12]],                           # island
-        [[a, b, n + 13], [a, b, n + 14]],                     # two more faces on edge (a, b)
-        [[n + 18, n + 19, n + 20]],                           # one vertex thrice after merging
-        [[n + 21, n + 22, n + 23]],                           # zero area
-    ])
+    extra_v = np.vstack(
+        [
+            v[:10],  # n .. n+9: duplicates of 0..9
+            [[5, 5, 5], [5, 5, 5.01], [5, 5.01, 5]],  # n+10..n+12: the island
+            fin_tips,  # n+13, n+14: small fins on an edge
+            [[9, 9, 9], [8, 8, 8], [7, 7, 7]],  # n+15..n+17: unreferenced
+            [[0.1, 0.2, 0.3]] * 3,  # n+18..n+20: coincident corners
+            [[0.1, 0.1, 0.1], [0.2, 0.2, 0.2], [0.4, 0.4, 0.4]],  # n+21..n+23: collinear corners
+        ]
+    )
+    extra_f = np.vstack(
+        [
+            f[:5],  # duplicate faces
+            [[n + 10, n + 11, n + 12]],  # island
+            [[a, b, n + 13], [a, b, n + 14]],  # two more faces on edge (a, b)
+            [[n + 18, n + 19, n + 20]],  # one vertex thrice after merging
+            [[n + 21, n + 22, n + 23]],  # zero area
+        ]
+    )
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.vstack([v, extra_v]), np.vstack([f, extra_f])))
     report = clean_mesh(ms, min_island_fraction=0.01, min_island_faces=0)

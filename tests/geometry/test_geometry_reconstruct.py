@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pymeshlab
 import pytest
+from rooms import ROOM, sample_room
 from scipy.spatial import cKDTree
 
 from invrender.geometry.clean import mean_point_spacing, reconstruct
-from rooms import ROOM, sample_room
 
 HOLES = np.array([[2.0, 1.5, 0.0], [0.0, 1.0, 2.5], [4.0, 2.0, 4.0], [1.0, 3.0, 1.0]])
 HOLE_RADIUS = 0.25
@@ -59,8 +59,9 @@ def holey_room():
     report = reconstruct(ms, depth=8, threads=1)
     seconds = time.perf_counter() - start
     mesh = ms.current_mesh()
-    return dict(positions=mesh.vertex_matrix(), faces=mesh.face_matrix(), report=report, seconds=seconds,
-                points=int(keep.sum()))
+    return dict(
+        positions=mesh.vertex_matrix(), faces=mesh.face_matrix(), report=report, seconds=seconds, points=int(keep.sum())
+    )
 
 
 def test_reconstruction_is_watertight_enough(holey_room):
@@ -68,8 +69,10 @@ def test_reconstruction_is_watertight_enough(holey_room):
     used by more than two faces. Poisson closes the 25 cm holes; trimming must not reopen them."""
     use = edge_use(holey_room["faces"])
     boundary = (use == 1).mean()
-    print(f"\n{holey_room['points']} points -> {len(holey_room['faces'])} faces in {holey_room['seconds']:.1f} s; "
-          f"boundary edges {100 * boundary:.3f}% of {len(use)}, non-manifold {(use > 2).sum()}")
+    print(
+        f"\n{holey_room['points']} points -> {len(holey_room['faces'])} faces in {holey_room['seconds']:.1f} s; "
+        f"boundary edges {100 * boundary:.3f}% of {len(use)}, non-manifold {(use > 2).sum()}"
+    )
     assert boundary < 0.01
     assert (use > 2).sum() == 0
 
@@ -108,8 +111,10 @@ def test_missing_ceiling_is_trimmed_not_a_blob():
     report = reconstruct(ms, depth=7, threads=1)
     top = float(ms.current_mesh().vertex_matrix()[:, 1].max())
     trimmed = report["removed"]["trimmed_far_from_points"]["faces"]
-    print(f"\ntrimmed {trimmed} of {report['poisson_faces']} faces; top of the surface {top:.2f} m, "
-          f"trim distance {report['trim_distance_m']:.2f} m")
+    print(
+        f"\ntrimmed {trimmed} of {report['poisson_faces']} faces; top of the surface {top:.2f} m, "
+        f"trim distance {report['trim_distance_m']:.2f} m"
+    )
     assert trimmed > 0
     assert top < 2.9 + 1.2 * report["trim_distance_m"]
 

@@ -33,8 +33,7 @@ def test_simplify_lands_within_five_percent(dense_torus, target):
     got = ms.current_mesh().face_number()
     print(f"\n100000 -> {got} faces (target {target}) in {seconds:.2f} s, {report['passes']} pass(es)")
     assert abs(got - target) <= 0.05 * target
-    assert report == {"target_faces": target, "faces_before": 100_000, "faces_after": got,
-                      "passes": report["passes"]}
+    assert report == {"target_faces": target, "faces_before": 100_000, "faces_after": got, "passes": report["passes"]}
     topology = ms.get_topological_measures()
     assert topology["genus"] == 1 and topology["boundary_edges"] == 0  # still a closed torus
     # the surface stays on the torus: every vertex within 1 cm of the tube's surface

@@ -7,14 +7,15 @@ import numpy as np
 import plyfile
 import pymeshlab
 import pytest
+from rooms import ROOM, sample_room
 
 from invrender.cli import main
+from invrender.geometry.stage import run
 from invrender.scene.atlas import AtlasTexels, dilate, texel_index
 from invrender.scene.atomic import MARKER
-from invrender.geometry.stage import run
 from invrender.scene.mesh_io import read_mesh
-from rooms import ROOM, sample_room
 from invrender.scene.types import SceneError
+
 
 def room_cloud(path, n, rng, noise=0.01):
     """A PLY point cloud on the sides of a 4 x 3 x 5 m box, inward normals, Gaussian noise."""
@@ -39,8 +40,7 @@ def stage_output(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("geometry")
     source = room_cloud(tmp / "room.ply", 15_000, np.random.default_rng(0))
     out = tmp / "out"
-    report = run(source, out, target_faces=5000, atlas_resolution=512, poisson_depth=7, threads=1,
-                          progress=False)
+    report = run(source, out, target_faces=5000, atlas_resolution=512, poisson_depth=7, threads=1, progress=False)
     print(f"\nstage timings: {report['timings_s']}")
     return out, report
 
@@ -83,8 +83,10 @@ def test_atlas_lookup_through_the_mesh_uvs(stage_output):
     covered = texels.mask[row, col]
     error = np.linalg.norm(texels.position[row, col] - points, axis=1) / texel_size
     same = (texels.triangle[row, col] == tri).mean()
-    print(f"\ncovered {100 * covered.mean():.2f}%, same triangle {100 * same:.1f}%, "
-          f"error in texel sizes: median {np.median(error[covered]):.2f}, max {error[covered].max():.2f}")
+    print(
+        f"\ncovered {100 * covered.mean():.2f}%, same triangle {100 * same:.1f}%, "
+        f"error in texel sizes: median {np.median(error[covered]):.2f}, max {error[covered].max():.2f}"
+    )
     assert covered.mean() > 0.98
     assert error[covered].max() < 1.0
     grown, grown_mask = dilate(texels.position, texels.mask, report["atlas"]["padding"])
@@ -97,8 +99,10 @@ def test_report_is_plausible(stage_output):
     atlas = report["atlas"]
     # the density is measured on the UVs, the utilisation on the rasterised texels: they agree
     implied = np.sqrt(atlas["covered_texels"] / report["mesh"]["area_m2"])
-    print(f"\nutilisation {atlas['utilisation']:.3f}, density {atlas['texel_density_per_m']:.1f} /m "
-          f"(covered texels / area implies {implied:.1f})")
+    print(
+        f"\nutilisation {atlas['utilisation']:.3f}, density {atlas['texel_density_per_m']:.1f} /m "
+        f"(covered texels / area implies {implied:.1f})"
+    )
     assert 0.4 < atlas["utilisation"] <= 1.0
     assert atlas["utilisation"] == pytest.approx(atlas["covered_texels"] / (512 * 512))
     assert atlas["texel_density_per_m"] == pytest.approx(implied, rel=0.1)
@@ -106,8 +110,13 @@ def test_report_is_plausible(stage_output):
     assert (atlas["width"], atlas["height"]) == (512, 512)
     assert report["mesh"]["area_m2"] == pytest.approx(2 * (4 * 3 + 4 * 5 + 3 * 5), rel=0.05)
     assert report["reconstruction"]["points"] == 15_000 and report["input"]["faces"] == 0
-    assert set(report["cleaning"]) >= {"duplicate_vertices", "duplicate_faces", "zero_area_faces",
-                                       "non_manifold_edges", "unreferenced_vertices"}
+    assert set(report["cleaning"]) >= {
+        "duplicate_vertices",
+        "duplicate_faces",
+        "zero_area_faces",
+        "non_manifold_edges",
+        "unreferenced_vertices",
+    }
 
 
 @pytest.mark.parametrize("kind", ["nan", "bare points", "empty"])
@@ -171,8 +180,20 @@ def test_cli_end_to_end_on_a_small_mesh(tmp_path, caplog):
     source = sphere_mesh(tmp_path / "sphere.ply", subdiv=4)  # 5120 faces, radius 1 m
     out = tmp_path / "geometry"
     caplog.set_level("INFO")  # under pytest the root logger has handlers, so main's --log file stays empty
-    code = main(["geometry", str(source), "--out", str(out), "--target-faces", "1000",
-                 "--texels-per-meter", "40", "--padding", "3"])
+    code = main(
+        [
+            "geometry",
+            str(source),
+            "--out",
+            str(out),
+            "--target-faces",
+            "1000",
+            "--texels-per-meter",
+            "40",
+            "--padding",
+            "3",
+        ]
+    )
     assert code == 0
     report = json.loads((out / "geometry.json").read_text())
     assert report["input_kind"] == "mesh" and report["input"]["faces"] == 5120

@@ -28,8 +28,24 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
     write_exr(capture / "images" / "view.exr", image)
 
     out = tmp_path / "gradients"
-    assert main(["gradients", "--geometry", str(geometry), "--cameras", str(capture / "sparse"),
-                 "--images", str(capture / "images"), "--out", str(out), "--spp", "16"]) == 0
+    assert (
+        main(
+            [
+                "gradients",
+                "--geometry",
+                str(geometry),
+                "--cameras",
+                str(capture / "sparse"),
+                "--images",
+                str(capture / "images"),
+                "--out",
+                str(out),
+                "--spp",
+                "16",
+            ]
+        )
+        == 0
+    )
     report = json.loads((out / "gradients.json").read_text())
     assert report["rays"] == len(pixel_requests(truth.cameras[0]))
     assert all(np.isfinite(v) and v > 0 for v in report["norms"].values()), report["norms"]
@@ -41,9 +57,26 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
 
     # MILO's float buckets: the same sums in another order
     floats = tmp_path / "buckets"
-    assert main(["gradients", "--geometry", str(geometry), "--cameras", str(capture / "sparse"),
-                 "--images", str(capture / "images"), "--out", str(floats), "--spp", "16",
-                 "--accumulation", "buckets"]) == 0
+    assert (
+        main(
+            [
+                "gradients",
+                "--geometry",
+                str(geometry),
+                "--cameras",
+                str(capture / "sparse"),
+                "--images",
+                str(capture / "images"),
+                "--out",
+                str(floats),
+                "--spp",
+                "16",
+                "--accumulation",
+                "buckets",
+            ]
+        )
+        == 0
+    )
     assert json.loads((floats / "gradients.json").read_text())["accumulation"] == "buckets"
     for name in ("kd", "ke", "kg"):
         fixed, bucketed = read_image(out / f"{name}.exr"), read_image(floats / f"{name}.exr")

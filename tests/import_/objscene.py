@@ -53,8 +53,9 @@ def sky_radiance(directions: np.ndarray) -> np.ndarray:
     """A smooth sky: blue above, warm at the horizon, dark below (radiance per direction)."""
     y = directions[..., 1:2]
     up = np.clip(y, 0, 1)
-    return (np.array([0.6, 0.8, 1.2]) * (0.3 + up) + np.array([1.0, 0.7, 0.4]) * np.exp(-8 * y**2) * (y > -0.2)
-            ).astype(np.float32)
+    return (np.array([0.6, 0.8, 1.2]) * (0.3 + up) + np.array([1.0, 0.7, 0.4]) * np.exp(-8 * y**2) * (y > -0.2)).astype(
+        np.float32
+    )
 
 
 def camera() -> Camera:
@@ -77,7 +78,8 @@ def write_room(folder: Path, latlong_writer) -> Path:
     cv2.imwrite(str(folder / "floor.png"), checker(8, 160, 60, (0.8, 0.6, 0.4)))
     (folder / "room.mtl").write_text(
         "newmtl walls\nKd 1 1 1\nmap_Kd walls.png\n\nnewmtl floor\nKd 1 1 1\nmap_Kd floor.png\n"
-        "\nnewmtl box\nKd 0.7 0.3 0.2\n\nnewmtl lamp\nKd 0 0 0\nKe 6 6 5\n")
+        "\nnewmtl box\nKd 0.7 0.3 0.2\n\nnewmtl lamp\nKd 0 0 0\nKe 6 6 5\n"
+    )
     w, h, d = 2.0, 2.5, 2.0
     walls = [
         quad([(-w, 0, -d), (w, 0, -d), (w, h, -d), (-w, h, -d)]),  # back wall, facing +z

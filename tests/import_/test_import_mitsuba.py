@@ -41,13 +41,22 @@ def mitsuba_scene(files, seed):
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
 
     def textured(name):
-        return {"type": "diffuse", "reflectance": {"type": "bitmap", "filename": str(files / name),
-                                                   "filter_type": "nearest"}}
+        return {
+            "type": "diffuse",
+            "reflectance": {"type": "bitmap", "filename": str(files / name), "filter_type": "nearest"},
+        }
 
-    bsdfs = {"walls": textured("walls.png"), "floor": textured("floor.png"),
-             "box": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.2]}}, "lamp": black}
-    scene = {"type": "scene", "integrator": bridge.path_integrator(BOUNCES),
-             "sensor": bridge.sensor_dict(camera(), SPP, seed)}
+    bsdfs = {
+        "walls": textured("walls.png"),
+        "floor": textured("floor.png"),
+        "box": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.2]}},
+        "lamp": black,
+    }
+    scene = {
+        "type": "scene",
+        "integrator": bridge.path_integrator(BOUNCES),
+        "sensor": bridge.sensor_dict(camera(), SPP, seed),
+    }
     for obj in ("room", "box", "lamp"):
         for material, path in split_by_material(files / f"{obj}.obj", files).items():
             shape = {"type": "obj", "filename": str(path), "bsdf": bsdfs[material]}
@@ -68,13 +77,40 @@ def blocks(image):
 def test_an_imported_room_renders_like_mitsuba_rendering_its_files(tmp_path):
     files = write_room(tmp_path / "files", write_sky)
     scene_dir, renders = tmp_path / "scene", tmp_path / "renders"
-    assert main(["import", str(files), "--out", str(scene_dir), "--environment", str(files / "sky.exr"),
-                 "--cube-size", "32"]) == 0
-    assert main(["render", str(scene_dir), "--out", str(renders), "--spp", str(SPP), "--seed", "3",
-                 "--max-bounces", str(BOUNCES)]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(files),
+                "--out",
+                str(scene_dir),
+                "--environment",
+                str(files / "sky.exr"),
+                "--cube-size",
+                "32",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "render",
+                str(scene_dir),
+                "--out",
+                str(renders),
+                "--spp",
+                str(SPP),
+                "--seed",
+                "3",
+                "--max-bounces",
+                str(BOUNCES),
+            ]
+        )
+        == 0
+    )
     ours, our_var = read_image(renders / "view.exr"), read_image(renders / "aovs" / "view_variance.exr")
-    theirs = [np.array(mi.render(mi.load_dict(mitsuba_scene(files, seed), parallel=False)))[..., :3]
-              for seed in (1, 2)]
+    theirs = [np.array(mi.render(mi.load_dict(mitsuba_scene(files, seed), parallel=False)))[..., :3] for seed in (1, 2)]
     mitsuba = 0.5 * (theirs[0] + theirs[1])
     # Per pixel, (a - b)^2 / 4 estimates the variance of Mitsuba's mean of two renders
     their_var = blocks((theirs[0] - theirs[1]) ** 2 / 4)

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from objscene import sky_radiance, write_room
+from objscene import write_room
 
 from invrender.cli import main
 from invrender.scene.atlas import texel_index
@@ -28,8 +28,10 @@ def imported(tmp_path_factory):
     root = tmp_path_factory.mktemp("import")
     files = write_room(root / "files", write_sky)
     out = root / "scene"
-    assert main(["import", str(files), "--out", str(out), "--environment", str(files / "sky.exr"),
-                 "--cube-size", "16"]) == 0
+    assert (
+        main(["import", str(files), "--out", str(out), "--environment", str(files / "sky.exr"), "--cube-size", "16"])
+        == 0
+    )
     return files, out, load_scene(out)
 
 
@@ -104,13 +106,20 @@ def test_a_window_material_opens_onto_the_sky(tmp_path):
     assert sets["box"].kw.min() == 1 and sets["box"].kd.max() == 0 and sets["box"].ks.max() == 0
 
 
-@pytest.mark.parametrize("breakage, field", [
-    (lambda f: (f / "room.mtl").write_text((f / "room.mtl").read_text().replace("newmtl floor", "newmtl parquet")),
-     "usemtl floor"),
-    (lambda f: (f / "walls.png").unlink(), "map_Kd"),
-    (lambda f: (f / "room.mtl").write_text((f / "room.mtl").read_text().replace("Kd 0.7 0.3 0.2", "Kd red")), "Kd"),
-    (lambda f: (f / "box.obj").write_text((f / "box.obj").read_text() + "f 1/1 2/2 99/3\n"), "face"),
-])
+@pytest.mark.parametrize(
+    "breakage, field",
+    [
+        (
+            lambda f: (f / "room.mtl").write_text(
+                (f / "room.mtl").read_text().replace("newmtl floor", "newmtl parquet")
+            ),
+            "usemtl floor",
+        ),
+        (lambda f: (f / "walls.png").unlink(), "map_Kd"),
+        (lambda f: (f / "room.mtl").write_text((f / "room.mtl").read_text().replace("Kd 0.7 0.3 0.2", "Kd red")), "Kd"),
+        (lambda f: (f / "box.obj").write_text((f / "box.obj").read_text() + "f 1/1 2/2 99/3\n"), "face"),
+    ],
+)
 def test_bad_files_stop_with_one_message_and_write_nothing(tmp_path, capsys, breakage, field):
     files = write_room(tmp_path / "files", write_sky)
     breakage(files)

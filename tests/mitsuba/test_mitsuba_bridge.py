@@ -4,13 +4,13 @@ flip fails loudly."""
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 
 # The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
 import invrender.mitsuba as mb  # noqa: I001
-import drjit as dr
-import mitsuba as mi
 from invrender.scene.cubemap import cube_to_direction, direction_to_cube, lookup_cube
 from invrender.scene.regions import classify_faces
 from invrender.scene.types import Camera, Maps, Mesh, Scene
@@ -175,7 +175,9 @@ def test_camera_projects_like_colmap(variant, kind):
     if variant == SCALAR and kind != "perspective":
         pytest.skip("the Python sensor costs a Python call per sample in scalar_rgb (its rays are checked below)")
     model, params = CAMERAS[kind]
-    camera = look_at_camera([0.4, 0.3, -2.0], [0.0, 0.1, 1.0], up=(0.1, 1.0, 0.0), width=32, height=24, params=params, model=model)
+    camera = look_at_camera(
+        [0.4, 0.3, -2.0], [0.0, 0.1, 1.0], up=(0.1, 1.0, 0.0), width=32, height=24, params=params, model=model
+    )
     x_axis, y_axis = camera.R[0], camera.R[1]  # camera right and down in world
     for point in ([0.5, 0.4, 1.5], [-0.3, -0.2, 0.8]):
         point = np.asarray(point)
@@ -198,7 +200,9 @@ def test_camera_projects_like_colmap(variant, kind):
 @pytest.mark.parametrize("kind", list(CAMERAS))
 def test_camera_ray_through_a_pixel_hits_what_projects_there(variant, kind):
     model, params = CAMERAS[kind]
-    camera = look_at_camera([0.4, 0.3, -2.0], [0.0, 0.1, 1.0], up=(0.1, 1.0, 0.0), width=32, height=24, params=params, model=model)
+    camera = look_at_camera(
+        [0.4, 0.3, -2.0], [0.0, 0.1, 1.0], up=(0.1, 1.0, 0.0), width=32, height=24, params=params, model=model
+    )
     mb.set_variant(variant)
     sensor = mi.load_dict(mb.sensor_dict(camera, spp=1))
     rng = np.random.default_rng(6)
@@ -207,7 +211,9 @@ def test_camera_ray_through_a_pixel_hits_what_projects_there(variant, kind):
         position = mi.Point2f(float(px[0] / camera.width), float(px[1] / camera.height))
         ray, _ = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(0.5, 0.5))
         origin, direction = np.ravel(np.array(ray.o)), np.ravel(np.array(ray.d))
-        assert np.allclose(origin + direction * (direction @ (point - origin)), point, atol=2e-5 * np.linalg.norm(point - origin))
+        assert np.allclose(
+            origin + direction * (direction @ (point - origin)), point, atol=2e-5 * np.linalg.norm(point - origin)
+        )
         assert np.allclose(np.linalg.norm(direction), 1.0, atol=1e-5)
 
 
@@ -342,7 +348,14 @@ def _random_directions(rng, count):
 
 
 @pytest.mark.parametrize("variant", BOTH)
-@pytest.mark.parametrize("kd,ks,ka", [((0.3, 0.5, 0.7), (0.04, 0.5, 0.9), 0.08), ((0.8, 0.1, 0.0), (0.0, 0.01, 0.3), 0.6), ((0.2, 0.2, 0.2), (0.9, 0.9, 0.9), 0.002)])
+@pytest.mark.parametrize(
+    "kd,ks,ka",
+    [
+        ((0.3, 0.5, 0.7), (0.04, 0.5, 0.9), 0.08),
+        ((0.8, 0.1, 0.0), (0.0, 0.01, 0.3), 0.6),
+        ((0.2, 0.2, 0.2), (0.9, 0.9, 0.9), 0.002),
+    ],
+)
 def test_milo_eval_matches_the_formula(variant, kd, ks, ka):
     rng = np.random.default_rng(3)
     count = 4000 if variant == LLVM else 200
@@ -411,7 +424,9 @@ def test_milo_sampling_chi2(wo):
     wo = list(np.asarray(wo) / np.linalg.norm(wo))
     params = mb.milo_bsdf((0.4, 0.4, 0.4), (0.5, 0.5, 0.5), 0.1)
     sample_func, pdf_func = BSDFAdapter("milo", params, wi=mi.Vector3f(*(float(c) for c in wo)))
-    chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func, sample_dim=3, sample_count=400_000, res=61)
+    chi2 = ChiSquareTest(
+        domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func, sample_dim=3, sample_count=400_000, res=61
+    )
     assert chi2.run(), chi2.messages
 
 
@@ -473,11 +488,12 @@ def test_milo_at_degenerate_directions_matches_the_kernel(variant):
 
     kd, ks, ka = np.array([0.5, 0.4, 0.3]), np.array([0.3, 0.2, 0.1]), 0.3
     wo = np.array([v for v, _ in DEGENERATE.values()])
-    wi = np.array([l for _, l in DEGENERATE.values()])
+    wi = np.array([light for _, light in DEGENERATE.values()])
     count = len(wo)
     n = np.array([0.0, 0.0, 1.0]) * np.where(wo[:, 2] < 0, -1.0, 1.0)[:, None]  # the kernel's n is on wo's side
-    f, pdf_cos, pdf_spec = KernelProbe().bsdf(n, wo, wi, np.tile(kd, (count, 1)), np.tile(ks, (count, 1)),
-                                              np.full(count, ka))
+    f, pdf_cos, pdf_spec = KernelProbe().bsdf(
+        n, wo, wi, np.tile(kd, (count, 1)), np.tile(ks, (count, 1)), np.full(count, ka)
+    )
     luminance = lambda c: c @ np.array([0.212671, 0.715160, 0.072169])  # mi.luminance
     p_spec = luminance(ks) / (luminance(kd) + luminance(ks))
     ci = np.sum(n * wi, 1)
@@ -558,11 +574,28 @@ def test_classify_faces_by_the_texels_under_them():
     maps = Maps.uniform(size=(4, 4), kd=0.5, ks=0.0, kw=0.0)
     maps.kw[:, :2], maps.kd[:, :2] = 1.0, 0.0
     maps.ke[3, 3] = (2.0, 2.0, 2.0)
-    uvs = np.array([[0.05, 0.95], [0.45, 0.95], [0.05, 0.05],  # inside the opening
-                    [0.30, 0.60], [0.70, 0.60], [0.30, 0.40],  # straddles it: kept, kw dropped
-                    [0.80, 0.20], [0.95, 0.20], [0.95, 0.05],  # over the emitting texel (v up)
-                    [0.60, 0.90], [0.95, 0.90], [0.60, 0.70]], np.float32)
-    mesh = Mesh(np.random.default_rng(0).normal(size=(12, 3)).astype(np.float32), np.arange(12, dtype=np.int32).reshape(4, 3), uvs)
+    uvs = np.array(
+        [
+            [0.05, 0.95],
+            [0.45, 0.95],
+            [0.05, 0.05],  # inside the opening
+            [0.30, 0.60],
+            [0.70, 0.60],
+            [0.30, 0.40],  # straddles it: kept, kw dropped
+            [0.80, 0.20],
+            [0.95, 0.20],
+            [0.95, 0.05],  # over the emitting texel (v up)
+            [0.60, 0.90],
+            [0.95, 0.90],
+            [0.60, 0.70],
+        ],
+        np.float32,
+    )
+    mesh = Mesh(
+        np.random.default_rng(0).normal(size=(12, 3)).astype(np.float32),
+        np.arange(12, dtype=np.int32).reshape(4, 3),
+        uvs,
+    )
     groups = classify_faces(Scene(mesh, maps))
     assert groups["hole"].tolist() == [True, False, False, False]
     assert groups["window_dropped"].tolist() == [False, True, False, False]
@@ -579,10 +612,23 @@ def test_lambertian_faces_keep_a_texel_of_margin_from_glossy_texels():
     maps = Maps.uniform(size=(8, 8), kd=0.5, ks=0.0)
     maps.ks[2, 5] = 0.3
     t = 1 / 8
-    uvs = np.array([[5.2 * t, 5.2 * t], [5.8 * t, 5.2 * t], [5.2 * t, 5.8 * t],  # on the glossy texel
-                    [6.2 * t, 5.2 * t], [6.8 * t, 5.2 * t], [6.2 * t, 5.8 * t],  # its neighbour: the margin
-                    [1.2 * t, 1.2 * t], [2.8 * t, 1.2 * t], [1.2 * t, 2.8 * t]], np.float32)  # far away
-    mesh = Mesh(np.random.default_rng(0).normal(size=(9, 3)).astype(np.float32), np.arange(9, dtype=np.int32).reshape(3, 3), uvs)
+    uvs = np.array(
+        [
+            [5.2 * t, 5.2 * t],
+            [5.8 * t, 5.2 * t],
+            [5.2 * t, 5.8 * t],  # on the glossy texel
+            [6.2 * t, 5.2 * t],
+            [6.8 * t, 5.2 * t],
+            [6.2 * t, 5.8 * t],  # its neighbour: the margin
+            [1.2 * t, 1.2 * t],
+            [2.8 * t, 1.2 * t],
+            [1.2 * t, 2.8 * t],
+        ],
+        np.float32,
+    )  # far away
+    mesh = Mesh(
+        np.random.default_rng(0).normal(size=(9, 3)).astype(np.float32), np.arange(9, dtype=np.int32).reshape(3, 3), uvs
+    )
     assert mb.lambertian_faces(Scene(mesh, maps)).tolist() == [False, False, True]
     maps.ks[:] = 0.0
     assert mb.lambertian_faces(Scene(mesh, maps)).all()

@@ -47,16 +47,19 @@ def _rule(pdf_fn, z0, dz, p0, dp, k: int, chunk: int):
     z, phi = np.broadcast_arrays(z, phi)
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
     dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1).reshape(-1, 3)
-    values = np.concatenate([np.asarray(pdf_fn(dirs[a:a + chunk]), dtype=np.float64).reshape(-1)
-                             for a in range(0, len(dirs), chunk)] or [np.zeros(0)])
+    values = np.concatenate(
+        [np.asarray(pdf_fn(dirs[a : a + chunk]), dtype=np.float64).reshape(-1) for a in range(0, len(dirs), chunk)]
+        or [np.zeros(0)]
+    )
     if not np.all(np.isfinite(values)) or np.any(values < 0):
         raise ValueError("pdf_fn returned a negative or non-finite density")
     values = values.reshape(len(z0), k + 1, k + 1)
     return np.einsum("mij,i,j->m", values, w, w) * dz * dp
 
 
-def integrate_cells(pdf_fn, res=(20, 40), tol: float = 1e-7, k: int = 4, min_depth: int = 0,
-                    max_depth: int = 6, chunk: int = 1 << 18) -> np.ndarray:
+def integrate_cells(
+    pdf_fn, res=(20, 40), tol: float = 1e-7, k: int = 4, min_depth: int = 0, max_depth: int = 6, chunk: int = 1 << 18
+) -> np.ndarray:
     """(res_z, res_phi) probability of each cell: the integral of pdf_fn over it.
 
     Adaptive: a rectangle's Simpson estimate (`_rule`) is compared with the sum of its four
@@ -153,9 +156,17 @@ def pearson(observed, expected, min_expected: float = 5.0):
     return stat, len(cells_e) - 1, f"{len(cells_e)} cells ({int(small.sum())} pooled)"
 
 
-def chi2_test(sample_fn, pdf_fn, n_samples: int = 1_000_000, res=(20, 40), tol: float | None = None,
-              significance: float = 0.01, test_count: int = 1, min_expected: float = 5.0,
-              sub: int | None = None):
+def chi2_test(
+    sample_fn,
+    pdf_fn,
+    n_samples: int = 1_000_000,
+    res=(20, 40),
+    tol: float | None = None,
+    significance: float = 0.01,
+    test_count: int = 1,
+    min_expected: float = 5.0,
+    sub: int | None = None,
+):
     """Run the test: n_samples from sample_fn, expected counts n * (integral of pdf_fn over
     each cell, `integrate_cells` with absolute tolerance tol, default 0.5 / n: half a sample),
     plus a cell for failed samples with expected count n (1 - integral of pdf_fn) (left out
@@ -187,11 +198,12 @@ def chi2_test(sample_fn, pdf_fn, n_samples: int = 1_000_000, res=(20, 40), tol: 
     p = float(stats.chi2.sf(stat, dof)) if dof > 0 and np.isfinite(stat) else (1.0 if dof == 0 else 0.0)
     threshold = sidak_threshold(significance, test_count)
     passed = p >= threshold
-    message = (f"{'accepted' if passed else 'REJECTED'}: p = {p:.3g} vs {threshold:.3g}, "
-               f"chi2 = {stat:.1f}, dof = {dof}, {message}, valid {1 - failed / n_samples:.4f}, "
-               f"pdf integral {integral:.4f}")
-    return Chi2Result(passed, p, threshold, stat, dof, message, 1.0 - failed / n_samples, integral,
-                      counts, expected)
+    message = (
+        f"{'accepted' if passed else 'REJECTED'}: p = {p:.3g} vs {threshold:.3g}, "
+        f"chi2 = {stat:.1f}, dof = {dof}, {message}, valid {1 - failed / n_samples:.4f}, "
+        f"pdf integral {integral:.4f}"
+    )
+    return Chi2Result(passed, p, threshold, stat, dof, message, 1.0 - failed / n_samples, integral, counts, expected)
 
 
 def normalize_rows(d):

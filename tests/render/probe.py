@@ -30,8 +30,9 @@ class KernelProbe:
             self.scene_args = host.upload(self.context, w_env, w_emit)
 
     def _in(self, array):
-        return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                         hostbuf=np.ascontiguousarray(array))
+        return cl.Buffer(
+            self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array)
+        )
 
     def _run(self, name, n, inputs, outputs, scene=False):
         bufs = [cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, max(o.nbytes, 16)) for o in outputs]
@@ -49,22 +50,32 @@ class KernelProbe:
         mats = np.zeros((count, 3, 4), np.float32)
         mats[:, 0, :3], mats[:, 0, 3] = kd, ka
         mats[:, 1, :3] = ks
-        f, pdfs = self._run("probe_bsdf", count, [self._in(mats), self._in(as4(n)), self._in(as4(wo)), self._in(as4(wi))],
-                            [np.zeros((count, 4), np.float32), np.zeros((count, 2), np.float32)])
+        f, pdfs = self._run(
+            "probe_bsdf",
+            count,
+            [self._in(mats), self._in(as4(n)), self._in(as4(wo)), self._in(as4(wi))],
+            [np.zeros((count, 4), np.float32), np.zeros((count, 2), np.float32)],
+        )
         return f[:, :3], pdfs[:, 0], pdfs[:, 1]
 
     def lobe_samples(self, n, wo, ka, u):
         count = len(n)
         cos_s, spec_s = self._run(
-            "probe_lobe_samples", count,
+            "probe_lobe_samples",
+            count,
             [self._in(as4(n)), self._in(as4(wo)), self._in(np.asarray(ka, np.float32)), self._in(as4(u))],
-            [np.zeros((count, 4), np.float32), np.zeros((count, 4), np.float32)])
+            [np.zeros((count, 4), np.float32), np.zeros((count, 4), np.float32)],
+        )
         return cos_s[:, :3], spec_s[:, :3]
 
     def rng(self, seed, counters):
         counters = np.ascontiguousarray(counters, np.uint32)
-        (out,) = self._run("probe_rng", len(counters), [np.uint64(seed), self._in(counters)],
-                           [np.zeros((len(counters), 4), np.float32)])
+        (out,) = self._run(
+            "probe_rng",
+            len(counters),
+            [np.uint64(seed), self._in(counters)],
+            [np.zeros((len(counters), 4), np.float32)],
+        )
         return out
 
     def mixture(self, texel, x, n, wo, u):
@@ -72,34 +83,51 @@ class KernelProbe:
         count = len(x)
         texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
         wi, parts, f = self._run(
-            "probe_mixture", count,
+            "probe_mixture",
+            count,
             [self._in(texel), self._in(as4(x)), self._in(as4(n)), self._in(as4(wo)), self._in(as4(u))],
-            [np.zeros((count, 4), np.float32) for _ in range(3)], scene=True)
+            [np.zeros((count, 4), np.float32) for _ in range(3)],
+            scene=True,
+        )
         return wi[:, :3], wi[:, 3], f[:, :3], parts
 
     def mixture_pdf(self, texel, x, n, wo, wi):
         count = len(wi)
         bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
         texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
-        (pdf,) = self._run("probe_mixture_pdf", count,
-                           [self._in(texel), self._in(bx(x)), self._in(bx(n)), self._in(bx(wo)), self._in(as4(wi))],
-                           [np.zeros(count, np.float32)], scene=True)
+        (pdf,) = self._run(
+            "probe_mixture_pdf",
+            count,
+            [self._in(texel), self._in(bx(x)), self._in(bx(n)), self._in(bx(wo)), self._in(as4(wi))],
+            [np.zeros(count, np.float32)],
+            scene=True,
+        )
         return pdf
 
     def intersect(self, origins, directions):
         """(t, b1, b2, original triangle or -1) per ray."""
         count = len(origins)
-        (out,) = self._run("probe_intersect", count, [self._in(as4(origins)), self._in(as4(directions))],
-                           [np.zeros((count, 4), np.float32)], scene=True)
+        (out,) = self._run(
+            "probe_intersect",
+            count,
+            [self._in(as4(origins)), self._in(as4(directions))],
+            [np.zeros((count, 4), np.float32)],
+            scene=True,
+        )
         return out
 
     def offset(self, p, n):
-        (out,) = self._run("probe_offset", len(p), [self._in(as4(p)), self._in(as4(n))],
-                           [np.zeros((len(p), 4), np.float32)])
+        (out,) = self._run(
+            "probe_offset", len(p), [self._in(as4(p)), self._in(as4(n))], [np.zeros((len(p), 4), np.float32)]
+        )
         return out[:, :3]
 
     def camera_directions(self, camera, pixels):
         pixels = np.ascontiguousarray(pixels, np.float32)
-        (out,) = self._run("probe_camera", len(pixels), [self._in(pack_cameras([camera])), self._in(pixels)],
-                           [np.zeros((len(pixels), 4), np.float32)])
+        (out,) = self._run(
+            "probe_camera",
+            len(pixels),
+            [self._in(pack_cameras([camera])), self._in(pixels)],
+            [np.zeros((len(pixels), 4), np.float32)],
+        )
         return out[:, :3]

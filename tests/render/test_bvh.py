@@ -34,9 +34,7 @@ def grid(k, z_wave=0.0):
     z = z_wave * np.sin(0.7 * x) * np.cos(0.5 * y)
     p = np.stack([x.ravel(), y.ravel(), z.ravel()], 1).astype(np.float32)
     i = (np.arange(k)[:, None] * (k + 1) + np.arange(k)[None, :]).ravel()
-    f = np.concatenate(
-        [np.stack([i, i + k + 1, i + 1], 1), np.stack([i + 1, i + k + 1, i + k + 2], 1)]
-    )
+    f = np.concatenate([np.stack([i, i + k + 1, i + 1], 1), np.stack([i + 1, i + k + 1, i + k + 2], 1)])
     return triangle_vertices(p, f)
 
 
@@ -351,8 +349,10 @@ def test_build_time_200k():
     t0 = time.perf_counter()
     bvh = build_bvh(*v)
     dt = time.perf_counter() - t0
-    print(f"\nbuild_bvh(200k triangles): {dt:.2f} s, {bvh.n_nodes} nodes, "
-          f"{bvh.nbytes / 200_000:.1f} bytes/triangle, SAH {bvh.sah_cost():.1f}")
+    print(
+        f"\nbuild_bvh(200k triangles): {dt:.2f} s, {bvh.n_nodes} nodes, "
+        f"{bvh.nbytes / 200_000:.1f} bytes/triangle, SAH {bvh.sah_cost():.1f}"
+    )
     assert dt < 10.0
     assert bvh.tri_order.size == 200_000
     assert np.array_equal(np.sort(bvh.tri_order), np.arange(200_000))

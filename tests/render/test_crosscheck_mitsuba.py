@@ -61,7 +61,7 @@ def test_room_agrees_with_mitsuba(glossy):
         rel_mean = abs(ours["radiance"].mean() / theirs.mean() - 1)
         # As bench's verdict: beyond the tolerance by more than 3 sigma of the two means' noise
         # (sigma ~0.1 % at llvm's size, up to ~0.5 % at scalar_rgb's).
-        sigma = np.sqrt(ours["variance"].sum() / ours["variance"].size**2 + theirs_mean_var) / theirs.mean()
+        sigma = np.sqrt(ours["variance"].sum() / ours["variance"].size ** 2 + theirs_mean_var) / theirs.mean()
         assert rel_mean - MEAN_TOLERANCE < 3 * sigma, f"{camera.name}: means differ by {rel_mean:.2%} ({sigma:.2%})"
         # Per pixel: within a bound from both renderers' standard errors. Bright, rare paths
         # (the sun through the window, the lamps in a glossy table) make the tails heavier than
@@ -72,5 +72,7 @@ def test_room_agrees_with_mitsuba(glossy):
         z = excess / np.sqrt(ours["variance"] + theirs_var + 1e-10)
         assert np.abs(z).max() < 6.0, f"{camera.name}: max |z| {np.abs(z).max():.2f}"
         per_pixel = np.abs(ours["radiance"] - theirs).mean() / theirs.mean()
-        print(f"{camera.name}: mean {ours['radiance'].mean():.4f} vs {theirs.mean():.4f} ({rel_mean:.3%}, "
-              f"sigma {sigma:.3%}), max |z| {np.abs(z).max():.2f}, mean abs diff {per_pixel:.3%}")
+        print(
+            f"{camera.name}: mean {ours['radiance'].mean():.4f} vs {theirs.mean():.4f} ({rel_mean:.3%}, "
+            f"sigma {sigma:.3%}), max |z| {np.abs(z).max():.2f}, mean abs diff {per_pixel:.3%}"
+        )

@@ -45,14 +45,22 @@ def inner_block(name: str) -> tuple:
 
 
 # map: (texels moved together, step), each on the texel kind where it matters
-ALONG_PATHS = {"kd": (inner_block("floor"), 0.01), "ks": (inner_block("table"), 0.01),
-               "ka": (inner_block("table"), 0.0003), "ke": (inner_block("light"), 0.5),
-               "kw": (inner_block("window"), 0.02),
-               "kg": ((0, slice(1, 3), slice(1, 3)), 0.1)}  # kg: the +X face, the sky the window shows
+ALONG_PATHS = {
+    "kd": (inner_block("floor"), 0.01),
+    "ks": (inner_block("table"), 0.01),
+    "ka": (inner_block("table"), 0.0003),
+    "ke": (inner_block("light"), 0.5),
+    "kw": (inner_block("window"), 0.02),
+    "kg": ((0, slice(1, 3), slice(1, 3)), 0.1),
+}  # kg: the +X face, the sky the window shows
 # ordinary renders: whole tiles and larger steps, against the finite differences' heavy tails;
 # "kd-black": the light's texels, kd = ks = 0, where only a forward difference stays in range
-IN_THE_MEAN = {"kd": (tile("floor"), 0.05), "ks": (tile("table"), 0.1), "ka": (tile("table"), 0.003),
-               "kd-black": (tile("light"), 0.05)}
+IN_THE_MEAN = {
+    "kd": (tile("floor"), 0.05),
+    "ks": (tile("table"), 0.1),
+    "ka": (tile("table"), 0.003),
+    "kd-black": (tile("light"), 0.05),
+}
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,6 @@ from invrender.render.adjoint import backward
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
 
-
 CAMERAS = {
     "room": None,  # the room's own view
     "grazing": look_at_camera((-1.9, 0.001, 1.4), (1.9, 0.0, -1.4), width=16, height=12, fov_x_deg=40),
@@ -21,13 +20,21 @@ CAMERAS = {
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(ks=st.sampled_from([0.0, 0.02, 0.5, 1.0]), ka=st.sampled_from([1e-6, 1e-4, 0.01, 0.3, 1.0]),
-       light=st.sampled_from([0.0, 1.0, 1e3, 1e6]), kd=st.sampled_from([0.0, 0.5, 1.0]), open_top=st.booleans(),
-       camera=st.sampled_from(list(CAMERAS)), bounces=st.sampled_from([1, 3, 10]),
-       adjoint_scale=st.sampled_from([1e-12, 1.0, 1e6]), accumulation=st.sampled_from(["fixed", "buckets"]),
-       seed=st.integers(0, 2**32 - 1))
-def test_hard_cases_never_give_nan_or_inf_gradients(ks, ka, light, kd, open_top, camera, bounces, adjoint_scale,
-                                                    accumulation, seed):
+@given(
+    ks=st.sampled_from([0.0, 0.02, 0.5, 1.0]),
+    ka=st.sampled_from([1e-6, 1e-4, 0.01, 0.3, 1.0]),
+    light=st.sampled_from([0.0, 1.0, 1e3, 1e6]),
+    kd=st.sampled_from([0.0, 0.5, 1.0]),
+    open_top=st.booleans(),
+    camera=st.sampled_from(list(CAMERAS)),
+    bounces=st.sampled_from([1, 3, 10]),
+    adjoint_scale=st.sampled_from([1e-12, 1.0, 1e6]),
+    accumulation=st.sampled_from(["fixed", "buckets"]),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_hard_cases_never_give_nan_or_inf_gradients(
+    ks, ka, light, kd, open_top, camera, bounces, adjoint_scale, accumulation, seed
+):
     scene = hard_room(ks, ka, light, kd, open_top)
     cam = CAMERAS[camera] or scene.cameras[0]
     scene.cameras = [cam]

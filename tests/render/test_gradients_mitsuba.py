@@ -25,14 +25,14 @@ convention got wrong), so a pass means the tolerance can tell.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 from testscenes import look_at_camera, quad
 
 # The bridge first: on import it points drjit at a libLLVM that works (DRJIT_LIBLLVM_PATH).
 import invrender.mitsuba as mb  # noqa: I001
-import drjit as dr
-import mitsuba as mi
 from invrender.render.adjoint import backward
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
@@ -74,9 +74,12 @@ def textured_box_room() -> tuple[Scene, list[np.ndarray]]:
         v = 1 - (row + 1 - inset - (1 - 2 * inset) * uv[:, 1]) / GRID  # v up: atlas row = floor((1 - v) N)
         uvs.append(np.stack([u, v], -1))
         tiles.append((slice(row * TILE, (row + 1) * TILE), slice(col * TILE, (col + 1) * TILE)))
-    mesh = Mesh(np.concatenate([p for p, _, _ in surfaces]).astype(np.float32),
-                np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(surfaces)]).astype(np.int32),
-                np.concatenate(uvs).astype(np.float32), np.repeat(np.arange(len(surfaces)) + 1, 2).astype(np.int32))
+    mesh = Mesh(
+        np.concatenate([p for p, _, _ in surfaces]).astype(np.float32),
+        np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(surfaces)]).astype(np.int32),
+        np.concatenate(uvs).astype(np.float32),
+        np.repeat(np.arange(len(surfaces)) + 1, 2).astype(np.int32),
+    )
     n = TILE * GRID
     maps = Maps.uniform(size=(n, n), kd=0.5, ks=0.0, ka=0.1, kg=0.0, cube=4)
     maps.kd[:] = np.random.default_rng(1).uniform(0.3, 0.8, (n, n, 3))
@@ -91,8 +94,15 @@ def room():
     scene, tiles = textured_box_room()
     camera = scene.cameras[0]
     weights = np.random.default_rng(2).uniform(0.5, 1.5, (camera.height, camera.width, 3)).astype(np.float32)
-    features = Features(specular=False, emission=True, emitter_sampling=True, environment=False, window=False,
-                        env_sampling=False, max_bounces=BOUNCES)
+    features = Features(
+        specular=False,
+        emission=True,
+        emitter_sampling=True,
+        environment=False,
+        window=False,
+        env_sampling=False,
+        max_bounces=BOUNCES,
+    )
     return scene, tiles, camera, weights, Renderer(scene, features)
 
 
@@ -101,15 +111,18 @@ def ours(room):
     """d Loss / d kd from the adjoint, one (N, N, 3) map per seed."""
     scene, _, camera, weights, renderer = room
     requests = pixel_requests(camera)
-    return np.stack([backward(renderer, [camera], requests, weights.reshape(-1, 3), SPP, seed=seed)["kd"]
-                     for seed in range(SEEDS)])
+    return np.stack(
+        [backward(renderer, [camera], requests, weights.reshape(-1, 3), SPP, seed=seed)["kd"] for seed in range(SEEDS)]
+    )
 
 
 def mitsuba_prb(scene, camera, weights) -> np.ndarray:
     """Mitsuba's d Loss / d kd, one (N, N, 3) map per seed: mi.render with the kd bitmap
     tracking gradients, dr.backward of the loss."""
-    loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(scene, camera, BOUNCES, SPP, "llvm_ad_rgb",
-                                                      integrator=mb.prb_integrator(BOUNCES)), parallel=False)
+    loaded = mi.load_dict(
+        mb.scene_to_mitsuba_diffuse(scene, camera, BOUNCES, SPP, "llvm_ad_rgb", integrator=mb.prb_integrator(BOUNCES)),
+        parallel=False,
+    )
     params = mi.traverse(loaded)
     key = mb.kd_parameter(params)
     dr.enable_grad(params[key])
@@ -128,9 +141,12 @@ def mitsuba_central_differences(scene, camera, weights, tiles) -> np.ndarray:
     """(seeds, surfaces, 3): d Loss / d(kd of every texel of a surface's tile, per channel) by
     central differences of renders with common random numbers. Channels do not mix in
     RGB, so one pair of renders per surface gives all three."""
-    loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(
-        scene, camera, BOUNCES, FD_SPP, mb.DEFAULT_VARIANT,
-        integrator=mb.path_integrator(BOUNCES)), parallel=False)
+    loaded = mi.load_dict(
+        mb.scene_to_mitsuba_diffuse(
+            scene, camera, BOUNCES, FD_SPP, mb.DEFAULT_VARIANT, integrator=mb.path_integrator(BOUNCES)
+        ),
+        parallel=False,
+    )
     params = mi.traverse(loaded)
     key = mb.kd_parameter(params)
     kd = np.array(params[key], np.float32)
@@ -179,8 +195,10 @@ def check(ours: np.ndarray, theirs: np.ndarray, what: str):
     z = excess_z(ours, theirs)[used]
     a, b = ours.mean(0).ravel()[used], theirs.mean(0).ravel()[used]
     se = np.sqrt(ours.reshape(len(ours), -1).var(0, ddof=1)[used] / len(ours))
-    print(f"{what}: {used.sum()} values, max excess |z| {z.max():.2f}, median relative standard error of ours "
-          f"{np.median(se / np.abs(b)):.2%}, sum ours / Mitsuba {a.sum() / b.sum():.4f}")
+    print(
+        f"{what}: {used.sum()} values, max excess |z| {z.max():.2f}, median relative standard error of ours "
+        f"{np.median(se / np.abs(b)):.2%}, sum ours / Mitsuba {a.sum() / b.sum():.4f}"
+    )
     assert z.max() < Z_MAX, f"{what}: max excess |z| {z.max():.2f} >= {Z_MAX} (ours {a}, Mitsuba {b})"
     return z
 
@@ -201,7 +219,10 @@ def test_kd_gradient_matches_mitsuba(room, ours, method):
         theirs, aggregate, what = block_sums(mitsuba_prb(scene, camera, weights)), block_sums, "prb, 4x4 blocks"
     else:
         theirs = mitsuba_central_differences(scene, camera, weights, tiles)
-        aggregate, what = (lambda grad: tile_sums(grad, tiles)), f"{mb.DEFAULT_VARIANT} central differences, per surface"
+        aggregate, what = (
+            (lambda grad: tile_sums(grad, tiles)),
+            f"{mb.DEFAULT_VARIANT} central differences, per surface",
+        )
     check(aggregate(ours), theirs, what)
     for name, wrong in wrong_versions(ours).items():
         z = excess_z(aggregate(wrong), theirs)

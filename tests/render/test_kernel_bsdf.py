@@ -51,7 +51,9 @@ def compare(kernel, reference, rel=REL_TOL):
     scale = np.maximum(np.abs(reference), 1e-6 * np.abs(reference).max(initial=1e-30))
     err = np.abs(kernel - reference) / scale
     worst = np.unravel_index(np.argmax(err), err.shape)
-    assert err.max() <= rel, f"relative error {err.max():.3g} at {worst}: kernel {kernel[worst]} vs ref {reference[worst]}"
+    assert err.max() <= rel, (
+        f"relative error {err.max():.3g} at {worst}: kernel {kernel[worst]} vs ref {reference[worst]}"
+    )
 
 
 def test_philox_matches_reference_bit_for_bit(probe):
@@ -139,7 +141,8 @@ FLOAT01 = st.floats(0, 1, allow_nan=False)
     normal=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3),
     wo=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3),
     u=st.tuples(*[st.floats(0, 0.99999994)] * 4),
-    kd=st.tuples(FLOAT01, FLOAT01, FLOAT01), ks=st.tuples(FLOAT01, FLOAT01, FLOAT01),
+    kd=st.tuples(FLOAT01, FLOAT01, FLOAT01),
+    ks=st.tuples(FLOAT01, FLOAT01, FLOAT01),
     log_ka=st.floats(-6, 0),
 )
 def test_property_random_materials_and_directions_never_give_nan(probe, normal, wo, u, kd, ks, log_ka):

@@ -17,8 +17,11 @@ from invrender.render.renderer import Renderer
 from invrender.render.scene_buffers import SCENE_ARGS, SceneArg, read_scene_data
 from invrender.scene.types import Maps
 
-ENTRIES = {"render.cl": ("render_rays", "primary_aovs"), "adjoint.cl": ("adjoint_rays",),
-           "probe.cl": ("probe_mixture", "probe_mixture_pdf", "probe_intersect")}
+ENTRIES = {
+    "render.cl": ("render_rays", "primary_aovs"),
+    "adjoint.cl": ("adjoint_rays",),
+    "probe.cl": ("probe_mixture", "probe_mixture_pdf", "probe_intersect"),
+}
 FLAGS = Features.everything(max_bounces=2).defines() + LAYOUT_DEFINES + ("-cl-kernel-arg-info",)
 GLOBAL, PRIVATE = cl.kernel_arg_address_qualifier.GLOBAL, cl.kernel_arg_address_qualifier.PRIVATE
 
@@ -30,8 +33,14 @@ def built(entry: str, kernel_dir=prog.KERNEL_DIR, flags=FLAGS) -> cl.Program:
 
 def kernel_arguments(kernel: cl.Kernel) -> list[tuple[str, str, int]]:
     info = cl.kernel_arg_info
-    return [(kernel.get_arg_info(i, info.NAME), kernel.get_arg_info(i, info.TYPE_NAME),
-             kernel.get_arg_info(i, info.ADDRESS_QUALIFIER)) for i in range(kernel.get_info(cl.kernel_info.NUM_ARGS))]
+    return [
+        (
+            kernel.get_arg_info(i, info.NAME),
+            kernel.get_arg_info(i, info.TYPE_NAME),
+            kernel.get_arg_info(i, info.ADDRESS_QUALIFIER),
+        )
+        for i in range(kernel.get_info(cl.kernel_info.NUM_ARGS))
+    ]
 
 
 def expected(args: tuple[SceneArg, ...]) -> list[tuple[str, str, int]]:
@@ -78,7 +87,9 @@ def altered_kernels(tmp_path, edit) -> tuple:
 def test_a_reordered_list_is_caught_and_followed(tmp_path):
     """Swapping two buffers of one type leaves every signature valid: only the names tell."""
     lines = (prog.KERNEL_DIR / "scene_data.h").read_text().splitlines(keepends=True)
-    i, j = (next(k for k, line in enumerate(lines) if f"BUFFER(float, {name})" in line) for name in ("env_cdf", "env_pmf"))
+    i, j = (
+        next(k for k, line in enumerate(lines) if f"BUFFER(float, {name})" in line) for name in ("env_cdf", "env_pmf")
+    )
     lines[i], lines[j] = lines[j], lines[i]
     kernel_dir, header = altered_kernels(tmp_path, lambda _: "".join(lines))
     got = kernel_arguments(cl.Kernel(built("render.cl", kernel_dir), "render_rays"))[: len(SCENE_ARGS)]
@@ -86,13 +97,16 @@ def test_a_reordered_list_is_caught_and_followed(tmp_path):
     assert got == expected(read_scene_data(header))  # ... and the host reads the new order
 
 
-@pytest.mark.parametrize("old, new, message", [
-    ("BUFFER(float2, tri_uv) NEXT", "BUFFER(float2, tri_uv) NEXT BUFFER(int, x) NEXT", "expected `"),
-    ("BUFFER(int, tri_id) NEXT", "BUFFER(int, tri_id)", "NEXT and a backslash go together"),
-    ("BUFFER(float, env_pmf)", "BUFFER(double, env_pmf)", "type 'double'"),
-    ("BUFFER(float, env_pmf)", "BUFFER(float, env_cdf)", "env_cdf listed twice"),
-    ("SCENE_DATA(BUFFER, VALUE, NEXT)", "SCENE_DATA(ARRAY, VALUE, NEXT)", "expected one line starting"),
-])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("BUFFER(float2, tri_uv) NEXT", "BUFFER(float2, tri_uv) NEXT BUFFER(int, x) NEXT", "expected `"),
+        ("BUFFER(int, tri_id) NEXT", "BUFFER(int, tri_id)", "NEXT and a backslash go together"),
+        ("BUFFER(float, env_pmf)", "BUFFER(double, env_pmf)", "type 'double'"),
+        ("BUFFER(float, env_pmf)", "BUFFER(float, env_cdf)", "env_cdf listed twice"),
+        ("SCENE_DATA(BUFFER, VALUE, NEXT)", "SCENE_DATA(ARRAY, VALUE, NEXT)", "expected one line starting"),
+    ],
+)
 def test_the_host_refuses_a_list_of_another_form(tmp_path, old, new, message):
     """Loudly, naming the line, rather than passing the kernels what it guessed."""
     text = (prog.KERNEL_DIR / "scene_data.h").read_text()

@@ -49,8 +49,13 @@ def test_closest_hits_match_brute_force():
     d = unit(rng.normal(size=(3000, 3)))
     got = probe.intersect(o, d)
     p32 = positions.astype(np.float32).astype(np.float64)
-    t, tri = brute_force(p32[0::3], p32[1::3], p32[2::3], o.astype(np.float32).astype(np.float64),
-                         d.astype(np.float32).astype(np.float64))
+    t, tri = brute_force(
+        p32[0::3],
+        p32[1::3],
+        p32[2::3],
+        o.astype(np.float32).astype(np.float64),
+        d.astype(np.float32).astype(np.float64),
+    )
     hit = tri >= 0
     agree = got[:, 3].astype(int) == tri
     assert agree.mean() > 0.999, f"{(~agree).sum()} of 3000 rays disagree"  # ties at shared t are allowed
@@ -81,7 +86,9 @@ def test_watertight_through_shared_vertices_and_edges(jitter):
     edge_points = edge_points[(np.abs(edge_points[:, :2]) < 0.99).all(1)]
     targets = np.concatenate([positions[inner], edge_points]).astype(np.float64)
     for height in (1.0, 1e3):
-        origins = targets + np.column_stack([rng.normal(scale=0.3, size=(len(targets), 2)), np.full(len(targets), height)])
+        origins = targets + np.column_stack(
+            [rng.normal(scale=0.3, size=(len(targets), 2)), np.full(len(targets), height)]
+        )
         out = probe.intersect(origins, unit(targets - origins))
         leaks = np.count_nonzero(out[:, 3] < 0)
         assert leaks == 0, f"{leaks} of {len(targets)} rays through vertices/edges leaked (height {height})"

@@ -40,7 +40,9 @@ def sampling_scene(kd, ks, ka, one_sided=False):
     lamp_low = quad((0.2, 1.0, 0.1), (0.3, 0, 0), (0, 0, 0.3))  # faces -Y
     lamp_high = quad((0.3, 2.0, 0.0), (0.5, 0, 0), (0, 0, 0.4))
     tilted = quad((-1.0, 1.5, -0.5), (0.3, 0.3, 0), (0, 0, 0.3))
-    parts = [floor, lamp_low, lamp_high, tilted] + ([quad((0.5, 1.2, -0.6), (0, 0, 0.3), (0.3, 0, 0))] if one_sided else [])
+    parts = [floor, lamp_low, lamp_high, tilted] + (
+        [quad((0.5, 1.2, -0.6), (0, 0, 0.3), (0.3, 0, 0))] if one_sided else []
+    )
     positions = np.concatenate([p for p, _, _ in parts])
     faces = np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(parts)]).astype(np.int32)
     uvs = np.concatenate([np.full((4, 2), [0.25, 0.75])] + [np.full((4, 2), [0.75, 0.75])] * (len(parts) - 1))
@@ -59,7 +61,8 @@ def reference_distributions(scene):
     emitting = power > 0
     one_sided = mesh.one_sided[emitting] if mesh.one_sided is not None else None
     return ref.EnvironmentDistribution(scene.maps.kg), ref.EmitterDistribution(
-        v[emitting, 0], v[emitting, 1], v[emitting, 2], power[emitting], one_sided)
+        v[emitting, 0], v[emitting, 1], v[emitting, 2], power[emitting], one_sided
+    )
 
 
 def run_chi2(probe, n_samples=400_000, seed=0, res=(20, 40), sub=16):
@@ -67,8 +70,13 @@ def run_chi2(probe, n_samples=400_000, seed=0, res=(20, 40), sub=16):
 
     def sample_fn(n):
         u = rng.uniform(0, 1, (n, 4)).astype(np.float32)
-        wi, _, _, _ = probe.mixture(0, np.broadcast_to(X, (n, 3)), np.broadcast_to(N, (n, 3)),
-                                    np.broadcast_to(WO / np.linalg.norm(WO), (n, 3)), u)
+        wi, _, _, _ = probe.mixture(
+            0,
+            np.broadcast_to(X, (n, 3)),
+            np.broadcast_to(N, (n, 3)),
+            np.broadcast_to(WO / np.linalg.norm(WO), (n, 3)),
+            u,
+        )
         wi = wi.astype(np.float64)
         wi[np.all(wi == 0, axis=1)] = np.nan  # spent samples
         return wi
@@ -113,9 +121,13 @@ def test_chi_square_rejects_a_wrong_density():
     probe = KernelProbe(Features.everything(), sampling_scene(0.5, 0.0, 0.1), w_env=1.0, w_emit=0.0)
     env = ref.EnvironmentDistribution(sky_with_sun())
     rng = np.random.default_rng(1)
-    sample = lambda n: probe.mixture(0, np.broadcast_to(X, (n, 3)), np.broadcast_to(N, (n, 3)),
-                                     np.broadcast_to(WO / np.linalg.norm(WO), (n, 3)),
-                                     rng.uniform(0, 1, (n, 4)).astype(np.float32))[0].astype(np.float64)
+    sample = lambda n: probe.mixture(
+        0,
+        np.broadcast_to(X, (n, 3)),
+        np.broadcast_to(N, (n, 3)),
+        np.broadcast_to(WO / np.linalg.norm(WO), (n, 3)),
+        rng.uniform(0, 1, (n, 4)).astype(np.float32),
+    )[0].astype(np.float64)
 
     def no_jacobian(d):
         face, s, t = cubemap.direction_to_cube(d)

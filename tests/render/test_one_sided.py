@@ -5,12 +5,12 @@ adjoint's ke derivative there against an exact finite difference."""
 
 import copy
 
+import mitsuba as mi
 import numpy as np
 import pytest
 from testscenes import box_room, look_at_camera
 
 import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
-import mitsuba as mi
 from invrender.render.adjoint import backward
 from invrender.render.analysis import analyse_scene
 from invrender.render.features import Features
@@ -30,16 +30,16 @@ def panel_room(one_sided: bool = True):
     scene.mesh.positions[4 * LIGHT_PART : 4 * LIGHT_PART + 4, 1] = CEILING - 0.02
     if one_sided:
         scene.mesh.one_sided = np.isin(np.arange(len(scene.mesh.faces)), [2 * LIGHT_PART, 2 * LIGHT_PART + 1])
-    gap = look_at_camera((0.3, CEILING - 0.01, 0.2), (0.3, CEILING + 1.0, 0.5), width=12, height=9, fov_x_deg=60,
-                         name="gap")
+    gap = look_at_camera(
+        (0.3, CEILING - 0.01, 0.2), (0.3, CEILING + 1.0, 0.5), width=12, height=9, fov_x_deg=60, name="gap"
+    )
     scene.cameras.append(gap)
     return scene
 
 
 def mitsuba_mean_and_variance(scene, camera, spp):
     loaded = mi.load_dict(mb.scene_to_mitsuba_diffuse(scene, camera, BOUNCES, spp // PASSES), parallel=False)
-    passes = np.stack([np.array(mi.render(loaded, spp=spp // PASSES, seed=2000 + k))[..., :3]
-                       for k in range(PASSES)])
+    passes = np.stack([np.array(mi.render(loaded, spp=spp // PASSES, seed=2000 + k))[..., :3] for k in range(PASSES)])
     return passes.mean(0), passes.var(0, ddof=1) / PASSES
 
 
@@ -70,8 +70,10 @@ def test_a_one_sided_panel_renders_like_mitsubas_area_emitter_and_leaves_the_cei
         z_mean = (mine["radiance"].mean() - theirs.mean()) / np.sqrt(mine["variance"].sum() + theirs_var.sum()) * z.size
         assert abs(z_mean) < 5.0, f"{camera.name}: means {mine['radiance'].mean():.4g} vs {theirs.mean():.4g}"
         two = before.render(camera, spp=SPP, seed=5, aovs=False)["radiance"]
-        print(f"{camera.name}: one-sided {mine['radiance'].mean():.4g}, Mitsuba {theirs.mean():.4g} (z {z_mean:.2f}), "
-              f"two-sided {two.mean():.4g}")
+        print(
+            f"{camera.name}: one-sided {mine['radiance'].mean():.4g}, Mitsuba {theirs.mean():.4g} (z {z_mean:.2f}), "
+            f"two-sided {two.mean():.4g}"
+        )
         if camera.name != "gap":
             assert abs(mine["radiance"].mean() / theirs.mean() - 1) < 0.02, camera.name
         else:

@@ -5,8 +5,8 @@ import numpy as np
 
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer
-from invrender.scene.cubemap import cube_texel, direction_to_cube, lookup_cube
 from invrender.scene.cameras import cube_face_cameras
+from invrender.scene.cubemap import cube_texel, direction_to_cube, lookup_cube
 from invrender.scene.types import Maps, Mesh, Scene
 
 
@@ -14,13 +14,23 @@ def test_cube_face_cameras_see_the_sky_texel_of_every_pixel_direction():
     rng = np.random.default_rng(0)
     maps = Maps.uniform(size=(2, 2), kg=0.0, cube=8)
     maps.kg[:] = rng.uniform(0.1, 2.0, maps.kg.shape)
-    far_triangle = Mesh(np.array([[1e4, 1e4, 1e4], [1e4 + 1, 1e4, 1e4], [1e4, 1e4 + 1, 1e4]], np.float32),
-                        np.array([[0, 1, 2]], np.int32), np.zeros((3, 2), np.float32))
+    far_triangle = Mesh(
+        np.array([[1e4, 1e4, 1e4], [1e4 + 1, 1e4, 1e4], [1e4, 1e4 + 1, 1e4]], np.float32),
+        np.array([[0, 1, 2]], np.int32),
+        np.zeros((3, 2), np.float32),
+    )
     center = np.array([0.3, -0.2, 0.1])
     cameras = cube_face_cameras(center, size=32)
     scene = Scene(far_triangle, maps, cameras)
-    features = Features(specular=False, emission=False, emitter_sampling=False, environment=True, window=False,
-                        env_sampling=False, max_bounces=0)
+    features = Features(
+        specular=False,
+        emission=False,
+        emitter_sampling=False,
+        environment=True,
+        window=False,
+        env_sampling=False,
+        max_bounces=0,
+    )
     renderer = Renderer(scene, features)
     for camera in cameras:
         assert np.isclose(np.linalg.det(camera.R), 1.0)

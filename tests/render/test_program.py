@@ -24,8 +24,10 @@ def test_every_kernel_file_names_itself_for_compiler_messages():
 def test_compiler_errors_point_at_the_header_that_has_them(tmp_path, monkeypatch):
     (tmp_path / "good.h").write_text('#line 2 "good.h"\ninline int one(void) { return 1; }\n')
     (tmp_path / "bad.h").write_text('#line 2 "bad.h"\n\ninline int two(void) { return undefined_name; }\n')
-    (tmp_path / "entry.cl").write_text('#line 2 "entry.cl"\n#include "good.h"\n#include "bad.h"\n'
-                                       "kernel void k(global int* x) { x[0] = one() + two(); }\n")
+    (tmp_path / "entry.cl").write_text(
+        '#line 2 "entry.cl"\n#include "good.h"\n#include "bad.h"\n'
+        "kernel void k(global int* x) { x[0] = one() + two(); }\n"
+    )
     source = prog.assemble_source("entry.cl", tmp_path)
     assert source.count('#line 2 "good.h"') == 1
     context, _ = context_and_queue(None)
@@ -36,8 +38,10 @@ def test_compiler_errors_point_at_the_header_that_has_them(tmp_path, monkeypatch
 def test_code_after_an_inlined_header_keeps_its_own_file_and_line(tmp_path):
     (tmp_path / "a.h").write_text('#line 2 "a.h"\n#include "b.h"\ninline int one(void) { return two() - 1; }\n')
     (tmp_path / "b.h").write_text('#line 2 "b.h"\ninline int two(void) { return 2; }\n')
-    (tmp_path / "entry.cl").write_text('#line 2 "entry.cl"\n#include "a.h"\n#include "b.h"\n\n'
-                                       "kernel void k(global int* x) { x[0] = one() + undefined_name; }\n")
+    (tmp_path / "entry.cl").write_text(
+        '#line 2 "entry.cl"\n#include "a.h"\n#include "b.h"\n\n'
+        "kernel void k(global int* x) { x[0] = one() + undefined_name; }\n"
+    )
     context, _ = context_and_queue(None)
     with pytest.raises(cl.RuntimeError, match=r"entry\.cl:5"):
         cl.Program(context, prog.assemble_source("entry.cl", tmp_path)).build()

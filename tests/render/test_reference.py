@@ -51,8 +51,11 @@ def failed_below(n, wi):
 KAT = [  # Random123 tests/kat_vectors: counter, key, expected (philox4x32 10)
     ([0, 0, 0, 0], [0, 0], [0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8]),
     ([0xFFFFFFFF] * 4, [0xFFFFFFFF] * 2, [0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD]),
-    ([0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344], [0xA4093822, 0x299F31D0],
-     [0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1]),
+    (
+        [0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344],
+        [0xA4093822, 0x299F31D0],
+        [0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1],
+    ),
 ]
 
 
@@ -225,8 +228,9 @@ def test_albedo_quadrature_against_a_direct_hemisphere_grid(ka, theta_deg):
     assert np.allclose(grid, bsdf.directional_albedo(t, 0.0, ks, ka), atol=1e-3, rtol=0)
 
 
-@pytest.mark.parametrize("ka,theta_deg,clamp", [(1e-3, 60.0, True), (0.01, 85.0, True),
-                                                 (0.1, 85.0, False), (0.8, 30.0, True)])
+@pytest.mark.parametrize(
+    "ka,theta_deg,clamp", [(1e-3, 60.0, True), (0.01, 85.0, True), (0.1, 85.0, False), (0.8, 30.0, True)]
+)
 def test_albedo_quadrature_against_monte_carlo(ka, theta_deg, clamp):
     # the model's albedo estimated with the reference importance sampler (cosine + Beckmann)
     count = 400_000
@@ -254,15 +258,15 @@ def test_max_albedo_is_an_upper_bound():
         f90 = bsdf.f90(ks, clamp)
         true_max = (ks[None, :, None] * a1[:, None] + f90[None, :, None] * a2[:, None]).max(-1)
         kd = np.array([0.0, 0.5, 1.0])
-        bound = bsdf.max_albedo(kd, np.broadcast_to(ks[:, None], (len(ks), 3))[None],
-                                ka[:, None], f90_clamp=clamp)
+        bound = bsdf.max_albedo(kd, np.broadcast_to(ks[:, None], (len(ks), 3))[None], ka[:, None], f90_clamp=clamp)
         assert bound.shape == (len(ka), len(ks), 3)
         excess = true_max[..., None] + kd - bound
         assert excess.max() <= 0, excess.max()
         assert (bound - true_max[..., None] - kd)[:, :10].max() < 0.06  # and not loose (ks <= 1)
     # Lambertian texels: exactly kd (plus the margin)
-    assert np.allclose(bsdf.max_albedo(np.full((5, 3), 0.7), np.zeros((5, 3)), np.full(5, 0.2)),
-                       0.7 + bsdf.ALBEDO_BOUND_MARGIN)
+    assert np.allclose(
+        bsdf.max_albedo(np.full((5, 3), 0.7), np.zeros((5, 3)), np.full(5, 0.2)), 0.7 + bsdf.ALBEDO_BOUND_MARGIN
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -288,14 +292,16 @@ def test_chi2_machinery_pooling_and_sidak():
 def test_chi2_cosine(theta_n):
     n, _ = frame(theta_n, 40.0, 0.0)
     sample = lambda k: bsdf.sample_cosine(n, *uniforms(k, seed=21)[:2])
-    res = chi2_test(sample, lambda d: bsdf.pdf_cosine(n, d), N_SAMPLES, significance=SIGNIFICANCE,
-                    test_count=CHI2_TESTS)
+    res = chi2_test(
+        sample, lambda d: bsdf.pdf_cosine(n, d), N_SAMPLES, significance=SIGNIFICANCE, test_count=CHI2_TESTS
+    )
     assert_accepted(res)
     assert res.integral == pytest.approx(1.0, abs=1e-3) and res.valid_fraction == 1.0
 
 
-@pytest.mark.parametrize("ka,theta_n,theta_o", [(0.01, 30.0, 40.0), (0.1, 0.0, 10.0), (0.1, 100.0, 80.0),
-                                                (0.8, 60.0, 0.0), (0.8, 0.0, 85.0)])
+@pytest.mark.parametrize(
+    "ka,theta_n,theta_o", [(0.01, 30.0, 40.0), (0.1, 0.0, 10.0), (0.1, 100.0, 80.0), (0.8, 60.0, 0.0), (0.8, 0.0, 85.0)]
+)
 def test_chi2_specular(ka, theta_n, theta_o):
     n, wo = frame(theta_n, 200.0, theta_o)
     sample = lambda k: failed_below(n, bsdf.sample_specular(n, wo, ka, *uniforms(k, seed=22)[:2]))
@@ -342,8 +348,10 @@ def emitter_set():
         return [(corner(-1, -1), corner(1, -1), corner(1, 1)), (corner(-1, -1), corner(1, 1), corner(-1, 1))]
 
     tris = quad([0.1, 0.0, 1.0], 0.6, 0.4) + quad([0.3, 0.1, 2.0], 0.9, 0.9)
-    tris += [([2.0, -0.5, 0.0], [2.0, 0.5, 0.2], [2.2, 0.0, 1.0]),
-             ([-0.5, -0.5, -1.5], [0.5, -0.5, -1.5], [0.0, 0.7, -1.2])]
+    tris += [
+        ([2.0, -0.5, 0.0], [2.0, 0.5, 0.2], [2.2, 0.0, 1.0]),
+        ([-0.5, -0.5, -1.5], [0.5, -0.5, -1.5], [0.0, 0.7, -1.2]),
+    ]
     v = np.array(tris, dtype=np.float64)
     return v[:, 0], v[:, 1], v[:, 2], np.array([1.0, 1.0, 3.0, 3.0, 2.0, 0.5])
 
@@ -352,8 +360,7 @@ def test_chi2_emitters_all_hits():
     em = sampling.EmitterDistribution(*emitter_set())
     x = np.zeros(3)
     sample = lambda k: em.sample(x, *uniforms(k, seed=24)[:3])
-    res = chi2_test(sample, lambda d: em.pdf(x, d), N_SAMPLES, significance=SIGNIFICANCE,
-                    test_count=CHI2_TESTS)
+    res = chi2_test(sample, lambda d: em.pdf(x, d), N_SAMPLES, significance=SIGNIFICANCE, test_count=CHI2_TESTS)
     assert_accepted(res)
     assert res.integral == pytest.approx(1.0, abs=2e-3)
 
@@ -362,7 +369,7 @@ def first_hit_only_pdf(em, x, d):
     """The WRONG emitter PDF: only the nearest crossed triangle counts."""
     best_s, best_p = np.full(len(d), np.inf), np.zeros(len(d))
     for t in range(len(em.prob)):
-        single = sampling.EmitterDistribution(em.v0[t:t + 1], em.v1[t:t + 1], em.v2[t:t + 1], [1.0])
+        single = sampling.EmitterDistribution(em.v0[t : t + 1], em.v1[t : t + 1], em.v2[t : t + 1], [1.0])
         p = single.pdf(x, d)
         s = dot(em.normal[t], em.v0[t] - x) / np.where(dot(em.normal[t], d) != 0, dot(em.normal[t], d), 1)
         nearer = (p > 0) & (s < best_s)
@@ -375,8 +382,7 @@ def test_chi2_rejects_wrong_pdfs():
     # must be able to fail: each density below is wrong in one documented way
     em = sampling.EmitterDistribution(*emitter_set())
     x = np.zeros(3)
-    res = chi2_test(lambda k: em.sample(x, *uniforms(k, seed=25)[:3]), lambda d: first_hit_only_pdf(em, x, d),
-                    N_REJECT)
+    res = chi2_test(lambda k: em.sample(x, *uniforms(k, seed=25)[:3]), lambda d: first_hit_only_pdf(em, x, d), N_REJECT)
     assert not res.passed, res.message
     assert res.integral < 0.95  # the hidden triangles' share is missing
 
@@ -391,20 +397,25 @@ def test_chi2_rejects_wrong_pdfs():
 
     n, wo = frame(30.0, 0.0, 50.0)
     ka = 0.3
+
     # Beckmann PDF of h used as a PDF of wi (missing d(omega_h)/d(omega_i) = 1 / (4 wo.h))
     def no_jac_spec(d):
         h = normalize(d + wo)
         return np.where(dot(n, d) > 0, bsdf.beckmann_d(n, h, ka) * dot(n, h), 0)
 
-    res = chi2_test(lambda k: failed_below(n, bsdf.sample_specular(n, wo, ka, *uniforms(k, seed=27)[:2])),
-                    no_jac_spec, N_REJECT)
+    res = chi2_test(
+        lambda k: failed_below(n, bsdf.sample_specular(n, wo, ka, *uniforms(k, seed=27)[:2])), no_jac_spec, N_REJECT
+    )
     assert not res.passed, res.message
 
 
-@pytest.mark.parametrize("kd,ks,ka,theta_n,theta_o", [
-    ([0.6, 0.5, 0.4], [0.04, 0.04, 0.04], 0.05, 10.0, 50.0),
-    ([0.05, 0.05, 0.05], [0.9, 0.8, 0.7], 0.01, 160.0, 70.0),
-])
+@pytest.mark.parametrize(
+    "kd,ks,ka,theta_n,theta_o",
+    [
+        ([0.6, 0.5, 0.4], [0.04, 0.04, 0.04], 0.05, 10.0, 50.0),
+        ([0.05, 0.05, 0.05], [0.9, 0.8, 0.7], 0.01, 160.0, 70.0),
+    ],
+)
 def test_chi2_mixture(kd, ks, ka, theta_n, theta_o):
     n, wo = frame(theta_n, 300.0, theta_o)
     env = sampling.EnvironmentDistribution(sky_with_sun())
@@ -429,8 +440,7 @@ def test_mixture_weights_and_strategy_choice():
     ks = [[1, 1, 1], [0.5, 0.5, 0.5], [0, 0, 0]]
     w = sampling.mixture_weights(kd, ks, 0.25, 0.25)
     assert np.allclose(w, [[0.25, 0.25, 0.25, 0.25], [0, 0.5, 0.25, 0.25], [0.5, 0, 0.25, 0.25]])
-    assert np.allclose(sampling.mixture_weights([1, 0, 0], [0, 0, 1], 0, 0),
-                       [0.2126 / 0.2848, 0.0722 / 0.2848, 0, 0])
+    assert np.allclose(sampling.mixture_weights([1, 0, 0], [0, 0, 1], 0, 0), [0.2126 / 0.2848, 0.0722 / 0.2848, 0, 0])
     u0 = np.linspace(0, 1 - 2**-24, 10001)
     for weights in ([0.5, 0, 0.5, 0], [0, 0.3, 0.7, 0], [0, 0, 0, 1], [0.1, 0.2, 0.3, 0.4]):
         k = sampling.choose_strategy(np.array(weights), u0)
@@ -455,14 +465,28 @@ _EM = sampling.EmitterDistribution(*emitter_set())
 
 
 @settings(max_examples=300, deadline=None)
-@given(n=UNIT, wo=UNIT, wi=UNIT, kd=RGB, ks=RGB, ka=KA, u=st.tuples(U, U, U, U), clamp=st.booleans(),
-       mirror=st.booleans(), x=st.tuples(*[st.floats(-3, 3)] * 3))
+@given(
+    n=UNIT,
+    wo=UNIT,
+    wi=UNIT,
+    kd=RGB,
+    ks=RGB,
+    ka=KA,
+    u=st.tuples(U, U, U, U),
+    clamp=st.booleans(),
+    mirror=st.booleans(),
+    x=st.tuples(*[st.floats(-3, 3)] * 3),
+)
 def test_property_no_nan_or_inf(n, wo, wi, kd, ks, ka, u, clamp, mirror, x):
     n, wo, wi = normalize(np.array(n)), normalize(np.array(wo)), normalize(np.array(wi))
     if mirror:  # the exact mirror direction: the top of the specular peak
         wi = bsdf.reflect(wo, n)
-    samples = [bsdf.sample_cosine(n, u[0], u[1]), bsdf.sample_specular(n, wo, ka, u[0], u[1]),
-               _ENV.sample(u[1], u[2], u[3]), _EM.sample(np.array(x), u[1], u[2], u[3])]
+    samples = [
+        bsdf.sample_cosine(n, u[0], u[1]),
+        bsdf.sample_specular(n, wo, ka, u[0], u[1]),
+        _ENV.sample(u[1], u[2], u[3]),
+        _EM.sample(np.array(x), u[1], u[2], u[3]),
+    ]
     for s in samples:
         assert np.all(np.isfinite(s)) and (np.linalg.norm(s) == 0 or abs(np.linalg.norm(s) - 1) < 1e-9)
     for v in [wi] + samples:

@@ -8,8 +8,9 @@ from invrender.render.analysis import AnalysisSettings, analyse_scene
 from invrender.render.features import Features
 from invrender.render.renderer import Renderer, pixel_requests
 
-DIFFUSE_ONLY = dict(specular=False, emission=True, emitter_sampling=True, environment=False, window=False,
-                    env_sampling=False)
+DIFFUSE_ONLY = dict(
+    specular=False, emission=True, emitter_sampling=True, environment=False, window=False, env_sampling=False
+)
 
 
 def interior(mask, steps=1):
@@ -122,6 +123,8 @@ def test_chosen_bounce_count_meets_the_configured_fraction(fraction):
     assert evidence["tail_bound"] <= fraction and 1 <= features.max_bounces < 10
     cam = scene.cameras[0]
     short = Renderer(scene, features).render(cam, spp=128, seed=4, aovs=False)["radiance"]
-    full = Renderer(scene, Features(**(DIFFUSE_ONLY | {"max_bounces": 10}))).render(cam, spp=128, seed=4, aovs=False)["radiance"]
+    full = Renderer(scene, Features(**(DIFFUSE_ONLY | {"max_bounces": 10}))).render(cam, spp=128, seed=4, aovs=False)[
+        "radiance"
+    ]
     measured = (full - short).sum() / full.sum()
     assert 0 <= measured < fraction, (features.max_bounces, measured)

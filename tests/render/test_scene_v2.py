@@ -63,8 +63,9 @@ def test_gradients_land_in_each_material_sets_own_texels(scenes):
     for name in materials:
         expected = _reference_set(v1.maps, columns, materials, name, reference)
         for m in ATLAS:
-            np.testing.assert_allclose(getattr(per_set[name], m), expected[m], rtol=1e-6, atol=1e-12,
-                                       err_msg=f"{name}.{m}")
+            np.testing.assert_allclose(
+                getattr(per_set[name], m), expected[m], rtol=1e-6, atol=1e-12, err_msg=f"{name}.{m}"
+            )
         assert np.abs(per_set[name].kd).sum() > 0, name
     outside = np.ones(v2.maps.atlas_shape, bool)  # padding and unused texels: no lookup lands there
     for rect in v2.packing.rects.values():
@@ -98,5 +99,4 @@ def test_the_instanced_set_gets_the_sum_of_both_copies(scenes):
         assert grads[label]["paint"].kd.sum() > 0, label
         assert not np.any(grads[label]["walls"].kd) and not np.any(grads[label]["wood"].kd), label
         assert np.abs(grads[label]["walls"].ke).sum() > 0, label  # the light it is lit by
-    np.testing.assert_allclose(grads["both"]["paint"].kd, grads["a"]["paint"].kd + grads["b"]["paint"].kd,
-                               rtol=1e-5)
+    np.testing.assert_allclose(grads["both"]["paint"].kd, grads["a"]["paint"].kd + grads["b"]["paint"].kd, rtol=1e-5)

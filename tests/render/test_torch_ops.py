@@ -13,16 +13,22 @@ from invrender.render.features import Features
 from invrender.render.renderer import Renderer
 from invrender.render.torch_ops import MAP_ORDER, render_rays
 
-FEATURES = Features(specular=False, emission=True, emitter_sampling=True, environment=False, window=False,
-                    env_sampling=False, max_bounces=3)
+FEATURES = Features(
+    specular=False,
+    emission=True,
+    emitter_sampling=True,
+    environment=False,
+    window=False,
+    env_sampling=False,
+    max_bounces=3,
+)
 
 
 def scene_with_two_views():
     scene = box_room(kd=(0.6, 0.5, 0.4), light=8.0)
     # a second view looks up at the ceiling light: seen directly, its emission is not
     # confused with the walls' albedo (MILO's diffuse-emission ambiguity)
-    scene.cameras.append(look_at_camera((0.3, 1.0, 0.9), (0.5, 2.6, 0.0), width=32, height=24, fov_x_deg=70,
-                                        name="up"))
+    scene.cameras.append(look_at_camera((0.3, 1.0, 0.9), (0.5, 2.6, 0.0), width=32, height=24, fov_x_deg=70, name="up"))
     return scene
 
 

@@ -10,11 +10,42 @@ from invrender.synthesize.room import pinhole_camera
 
 def icosphere(radius=1.0, center=(0, 0, 0), subdivisions=3):
     t = (1 + 5**0.5) / 2
-    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-             (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
-             (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    verts = [
+        (-1, t, 0),
+        (1, t, 0),
+        (-1, -t, 0),
+        (1, -t, 0),
+        (0, -1, t),
+        (0, 1, t),
+        (0, -1, -t),
+        (0, 1, -t),
+        (t, 0, -1),
+        (t, 0, 1),
+        (-t, 0, -1),
+        (-t, 0, 1),
+    ]
+    faces = [
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
+    ]
     v = np.array(verts, np.float64)
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     f = np.array(faces)
@@ -54,8 +85,9 @@ def merge(*parts):
         uvs.append(uv)
         ids.append(np.full(len(f), index + 1, np.int32))
         offset += len(p)
-    return Mesh(np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs),
-                np.concatenate(ids))
+    return Mesh(
+        np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs), np.concatenate(ids)
+    )
 
 
 def look_at_camera(eye, target, width=48, height=36, fov_x_deg=50.0, name="cam", cx=None, cy=None):
@@ -136,8 +168,17 @@ def _tile_uvs(uvs: np.ndarray, tile: int) -> np.ndarray:
     return np.stack([u, v], 1).astype(np.float32)
 
 
-ROOM_TILES = {"floor": 0, "ceiling": 1, "back": 2, "front": 3, "left": 4, "right": 5, "light": 6, "table": 7,
-              "window": 8}
+ROOM_TILES = {
+    "floor": 0,
+    "ceiling": 1,
+    "back": 2,
+    "front": 3,
+    "left": 4,
+    "right": 5,
+    "light": 6,
+    "table": 7,
+    "window": 8,
+}
 
 
 def textured_room(size=(32, 24), seed=0):
@@ -183,8 +224,9 @@ def hard_room(ks=1.0, ka=1e-6, light=1e6, kd=(0.6, 0.5, 0.4), open_top=False):
     n0, n1 = len(room.mesh.positions), len(room.mesh.positions) + len(p)
     faces = np.concatenate([room.mesh.faces, f + n0, [[n1, n1 + 1, n1 + 2], [n1 + 3, n1 + 4, n1 + 5]]])
     uvs = np.concatenate([room.mesh.uvs, np.full((len(p) + 6, 2), [0.25, 0.75], np.float32)])
-    mesh = Mesh(np.concatenate([room.mesh.positions, p, degenerate]), faces[2 if open_top else 0:].astype(np.int32),
-                uvs)
+    mesh = Mesh(
+        np.concatenate([room.mesh.positions, p, degenerate]), faces[2 if open_top else 0 :].astype(np.int32), uvs
+    )
     return Scene(mesh, room.maps, room.cameras)
 
 
@@ -210,9 +252,14 @@ def _in_rect(uvs, u0, v0, u1, v1, inset=1e-3):
 def cube_mesh(half=0.25):
     """A cube standing on y = 0, fronts outwards, every face over its whole (inset) atlas."""
     h = half
-    faces = [((0, h, h), (h, 0, 0), (0, h, 0)), ((0, h, -h), (-h, 0, 0), (0, h, 0)),
-             ((h, h, 0), (0, 0, -h), (0, h, 0)), ((-h, h, 0), (0, 0, h), (0, h, 0)),
-             ((0, 2 * h, 0), (h, 0, 0), (0, 0, -h)), ((0, 0, 0), (h, 0, 0), (0, 0, h))]
+    faces = [
+        ((0, h, h), (h, 0, 0), (0, h, 0)),
+        ((0, h, -h), (-h, 0, 0), (0, h, 0)),
+        ((h, h, 0), (0, 0, -h), (0, h, 0)),
+        ((-h, h, 0), (0, 0, h), (0, h, 0)),
+        ((0, 2 * h, 0), (h, 0, 0), (0, 0, -h)),
+        ((0, 0, 0), (h, 0, 0), (0, 0, h)),
+    ]
     parts = [quad(*f) for f in faces]
     mesh = merge(*[(p, f, _in_rect(uv, 0, 0, 1, 1)) for p, f, uv in parts])
     mesh.instance_ids = None
@@ -262,8 +309,9 @@ def three_objects(size=(32, 24), seed=0):
         SceneObject("cube_b", cube, "paint", placed @ rigid(60, (0.6, 0.0, -0.2)), instance_id=4),
     ]
     to_world = lambda x: (placed @ np.append(x, 1.0))[:3]
-    camera = look_at_camera(to_world((-1.2, 1.4, 1.2)), to_world((0.5, 0.6, -0.6)), width=size[0], height=size[1],
-                            fov_x_deg=75)
+    camera = look_at_camera(
+        to_world((-1.2, 1.4, 1.2)), to_world((0.5, 0.6, -0.6)), width=size[0], height=size[1], fov_x_deg=75
+    )
     kg = np.zeros((6, 2, 2, 3), np.float32)
     return objects, materials, kg, [camera]
 
@@ -294,6 +342,7 @@ def flattened_by_hand(objects, materials, kg, cameras):
         uvs.append(np.stack([u, v], 1).astype(np.float32))
         ids.append(np.full(len(mesh.faces), obj.instance_id, np.int32))
         offset += len(mesh.positions)
-    mesh = Mesh(np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs),
-                np.concatenate(ids))
+    mesh = Mesh(
+        np.concatenate(positions), np.concatenate(faces).astype(np.int32), np.concatenate(uvs), np.concatenate(ids)
+    )
     return Scene(mesh, maps, cameras), column

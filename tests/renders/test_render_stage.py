@@ -2,7 +2,6 @@
 
 import numpy as np
 import OpenEXR
-import pytest
 
 from invrender.cli import main
 from invrender.scene.images import read_image
@@ -23,8 +22,14 @@ def test_render_stage_writes_radiance_previews_and_exact_id_aovs(stage_scene_dir
 def test_render_stage_names_a_missing_camera_and_writes_nothing(stage_scene_dir, tmp_path, capsys):
     out = tmp_path / "renders"
     assert main(["render", str(stage_scene_dir), "--out", str(out), "--camera", "nope"]) == 2
-    assert capsys.readouterr().err.strip().endswith(f"{stage_scene_dir / 'scene.json'}: cameras: expected a camera named nope "
-                                                    "(--camera); the scene has view.exr")
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .endswith(
+            f"{stage_scene_dir / 'scene.json'}: cameras: expected a camera named nope "
+            "(--camera); the scene has view.exr"
+        )
+    )
     assert not out.exists()
 
 

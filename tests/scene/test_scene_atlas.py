@@ -15,7 +15,9 @@ def shapes():
     """A box and a can, side by side, as two groups (two instance ids)."""
     b = box([0, 0, 0], [1.0, 0.5, 0.8], cell=0.25)
     c = cylinder(0.3, 0.6, 24, 2).transformed(np.array([[1, 0, 0, 2], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]))
-    prim = concatenate([b._replace(part=np.zeros(len(b.faces), np.int32)), c._replace(part=np.ones(len(c.faces), np.int32))])
+    prim = concatenate(
+        [b._replace(part=np.zeros(len(b.faces), np.int32)), c._replace(part=np.ones(len(c.faces), np.int32))]
+    )
     return prim
 
 
@@ -86,7 +88,9 @@ def test_texel_points_normals_and_barycentrics(unwrapped):
     h, w = texels.shape
     centre = np.stack([(cols + 0.5) / w, 1 - (rows + 0.5) / h], 1)
     np.testing.assert_allclose(np.einsum("nk,nkc->nc", b, atlas.uvs[mesh.faces[t]]), centre, atol=1e-5)
-    np.testing.assert_allclose(texels.position[m], np.einsum("nk,nkc->nc", b, atlas.positions[mesh.faces[t]]), atol=1e-5)
+    np.testing.assert_allclose(
+        texels.position[m], np.einsum("nk,nkc->nc", b, atlas.positions[mesh.faces[t]]), atol=1e-5
+    )
     np.testing.assert_allclose(texels.normal[m], face_normals(atlas.positions, mesh.faces)[t], atol=1e-5)
 
 
@@ -129,7 +133,9 @@ def test_rasterize_20k_triangles_into_1024_squared_quickly():
     positions = np.concatenate([uvs, np.zeros((len(uvs), 1), np.float32)], 1)
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     a = (i * (n + 1) + j).ravel()
-    faces = np.concatenate([np.stack([a, a + n + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + 1], 1)]).astype(np.int32)
+    faces = np.concatenate([np.stack([a, a + n + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + 1], 1)]).astype(
+        np.int32
+    )
     start = time.perf_counter()
     texels = rasterize_atlas(Mesh(positions, faces, uvs), 1024, 1024)
     assert time.perf_counter() - start < 10

@@ -82,8 +82,11 @@ def test_atomic_dir_refuses_what_it_did_not_write(tmp_path, existing):
         if existing == "other_kind":
             (target / MARKER).write_text("scene\n")
     before = {p: (p.read_bytes() if p.is_file() else None) for p in tmp_path.rglob("*") if not p.is_symlink()}
-    with pytest.raises(SceneError, match=r"out: output: expected a new path, an empty directory or an earlier "
-                                         r"renders directory of invrender"):
+    with pytest.raises(
+        SceneError,
+        match=r"out: output: expected a new path, an empty directory or an earlier "
+        r"renders directory of invrender",
+    ):
         with atomic_dir(target, kind="renders") as tmp:
             (tmp / "x").write_text("x")
     after = {p: (p.read_bytes() if p.is_file() else None) for p in tmp_path.rglob("*") if not p.is_symlink()}
@@ -101,11 +104,15 @@ def test_atomic_dir_accepts_an_empty_directory(tmp_path):
 def test_temporaries_of_dead_processes_are_swept(tmp_path):
     """A SIGKILLed writer leaves its temporary; the next write of the same target removes it,
     and leaves a live writer's temporary and other targets' temporaries alone."""
-    code = ("import os, sys; from invrender.scene.atomic import atomic_dir, atomic_path\n"
-            "d = atomic_dir(sys.argv[1] + '/out', kind='renders'); tmp = d.__enter__()\n"
-            "p = atomic_path(sys.argv[1] + '/f.json', kind='features', recognise=bool); p.__enter__().write_text('x')\n"
-            "os.kill(os.getpid(), 9)")
-    subprocess.run([sys.executable, "-c", code, str(tmp_path)], env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
+    code = (
+        "import os, sys; from invrender.scene.atomic import atomic_dir, atomic_path\n"
+        "d = atomic_dir(sys.argv[1] + '/out', kind='renders'); tmp = d.__enter__()\n"
+        "p = atomic_path(sys.argv[1] + '/f.json', kind='features', recognise=bool); p.__enter__().write_text('x')\n"
+        "os.kill(os.getpid(), 9)"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path)], env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)}
+    )
     dead = sorted(p.name for p in tmp_path.iterdir())
     assert len(dead) == 2 and dead[0].startswith(".f.tmp-") and dead[1].startswith(".out.tmp-"), dead
     with atomic_dir(tmp_path / "other", kind="renders") as tmp:  # another target: not its business

@@ -14,11 +14,13 @@ def random_rotation(rng):
     q = rng.normal(size=4)
     q /= np.linalg.norm(q)
     w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def some_cameras():
@@ -29,7 +31,9 @@ def some_cameras():
         ("b/x.exr", "SIMPLE_PINHOLE", [555.5, 320.0, 240.0]),
     ]
     return [
-        Camera(name=n, model=m, width=640, height=480, params=np.array(p), R=random_rotation(rng), t=rng.normal(size=3) * 3)
+        Camera(
+            name=n, model=m, width=640, height=480, params=np.array(p), R=random_rotation(rng), t=rng.normal(size=3) * 3
+        )
         for n, m, p in specs
     ]
 
@@ -85,12 +89,14 @@ def test_unreadable_model(tmp_path):
 def gl_pixel(c2w_gl, fx, fy, cx, cy, w, h, X, near=0.01, far=100.0):
     """Pixel of X by an OpenGL pipeline: view matrix, off-centre projection matrix, NDC, viewport."""
     view = np.linalg.inv(c2w_gl)
-    P = np.array([
-        [2 * fx / w, 0, 1 - 2 * cx / w, 0],
-        [0, 2 * fy / h, 2 * cy / h - 1, 0],
-        [0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)],
-        [0, 0, -1, 0],
-    ])
+    P = np.array(
+        [
+            [2 * fx / w, 0, 1 - 2 * cx / w, 0],
+            [0, 2 * fy / h, 2 * cy / h - 1, 0],
+            [0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)],
+            [0, 0, -1, 0],
+        ]
+    )
     clip = P @ view @ np.append(X, 1.0)
     ndc = clip[:3] / clip[3]
     return np.array([(ndc[0] + 1) * w / 2, (1 - ndc[1]) * h / 2])  # window y points down in images
@@ -111,7 +117,12 @@ def test_transforms_json_projection_matches_opengl(tmp_path):
     w, h, fx, fy, cx, cy = 800, 600, 700.0, 710.0, 390.0, 310.0
     c2w = look_at_gl(np.array([2.0, 1.5, 3.0]), np.array([0.1, 0.2, -0.3]), np.array([0.0, 1.0, 0.0]))
     doc = {
-        "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": w, "h": h,
+        "fl_x": fx,
+        "fl_y": fy,
+        "cx": cx,
+        "cy": cy,
+        "w": w,
+        "h": h,
         "frames": [{"file_path": "./images/f0.png", "transform_matrix": c2w.tolist()}],
     }
     (tmp_path / "transforms.json").write_text(json.dumps(doc))

@@ -227,7 +227,7 @@ def test_round_trip_through_the_export_size(n):
     back = cm.latlong_to_cube(cm.cube_to_latlong(sun, width), n)[..., 0]
     assert back[4, n // 2, n // 2] > 0.8 and back.sum() == pytest.approx(1.0, abs=0.05)  # same-sized texels here
     near = np.zeros((6, n, n), bool)
-    near[4, n // 2 - 1:n // 2 + 2, n // 2 - 1:n // 2 + 2] = True
+    near[4, n // 2 - 1 : n // 2 + 2, n // 2 - 1 : n // 2 + 2] = True
     assert np.all(back[~near] == 0)
 
 
@@ -236,9 +236,18 @@ def test_latlong_round_trip_keeps_the_light(sky):
     assert np.allclose(totals(image, latlong_cells(W, H))[0], totals(sky, latlong_cells(W, H))[0], rtol=1e-6, atol=0)
 
 
-@pytest.mark.parametrize("i, j, face", [
-    (256, 512, 4), (256, 256, 0), (256, 768, 1), (256, 0, 5), (256, 1024, 5), (0, 300, 2), (512, 700, 3),
-])
+@pytest.mark.parametrize(
+    "i, j, face",
+    [
+        (256, 512, 4),
+        (256, 256, 0),
+        (256, 768, 1),
+        (256, 0, 5),
+        (256, 1024, 5),
+        (0, 300, 2),
+        (512, 700, 3),
+    ],
+)
 def test_a_sun_lands_in_the_texel_of_its_direction(i, j, face):
     """docs/export.md: the image centre looks along +Z, a quarter from the left along +X, three
     quarters along -X, the left and right edges along -Z, the top row at +Y, the bottom at -Y. A

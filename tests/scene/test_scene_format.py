@@ -30,9 +30,18 @@ def make_scene(cameras=True, size=(8, 12), cube=4):
     cams = []
     if cameras:
         cams = [
-            Camera("v1.png", "PINHOLE", 32, 24, np.array([30.0, 30.0, 16.0, 12.0]), np.eye(3), np.array([0.0, 0.0, 2.0])),
-            Camera("v0.png", "OPENCV", 32, 24, np.array([30.0, 31.0, 16.5, 12.5, 0.01, 0, 0, 0]),
-                   np.diag([1.0, -1.0, -1.0]), np.array([0.5, 0.0, 3.0])),
+            Camera(
+                "v1.png", "PINHOLE", 32, 24, np.array([30.0, 30.0, 16.0, 12.0]), np.eye(3), np.array([0.0, 0.0, 2.0])
+            ),
+            Camera(
+                "v0.png",
+                "OPENCV",
+                32,
+                24,
+                np.array([30.0, 31.0, 16.5, 12.5, 0.01, 0, 0, 0]),
+                np.diag([1.0, -1.0, -1.0]),
+                np.array([0.5, 0.0, 3.0]),
+            ),
         ]
     return Scene(mesh=mesh, maps=maps, cameras=cams)
 
@@ -118,7 +127,9 @@ def test_wrong_version_and_path_outside(scene_dir):
     edit_json(scene_dir, lambda d: d.update(version=3))
     assert "scene.json: version: expected one of 1, 2, got 3" in one_error(scene_dir)
     edit_json(scene_dir, lambda d: d.update(version=2))  # a v1 document that says it is v2
-    assert "scene.json: maps: expected no such field: allowed fields are cameras, format, kg, materials" in one_error(scene_dir)
+    assert "scene.json: maps: expected no such field: allowed fields are cameras, format, kg, materials" in one_error(
+        scene_dir
+    )
     edit_json(scene_dir, lambda d: (d.update(version=1), d["maps"].update(kd="../kd.exr")))
     assert "scene.json: maps.kd: expected a relative path" in one_error(scene_dir)
 

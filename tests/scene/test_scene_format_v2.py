@@ -37,8 +37,12 @@ def test_v2_round_trip_keeps_objects_sets_and_instances(v2_dir):
     objects, materials, kg, _ = three_objects()
     doc = json.loads((v2_dir / "scene.json").read_text())
     assert doc["version"] == 2 and sorted(doc["materials"]) == ["paint", "walls", "wood"]
-    assert [o["mesh"] for o in doc["objects"]] == ["meshes/room.ply", "meshes/table.ply", "meshes/cube_a.ply",
-                                                   "meshes/cube_a.ply"]  # the cube is written once
+    assert [o["mesh"] for o in doc["objects"]] == [
+        "meshes/room.ply",
+        "meshes/table.ply",
+        "meshes/cube_a.ply",
+        "meshes/cube_a.ply",
+    ]  # the cube is written once
     assert sorted(p.name for p in (v2_dir / "meshes").iterdir()) == ["cube_a.ply", "room.ply", "table.ply"]
     scene = load_scene(v2_dir)
     assert scene.objects[2].mesh is scene.objects[3].mesh
@@ -60,8 +64,9 @@ def test_write_writes_what_the_renderer_renders(v2_dir, tmp_path):
     r = scene.packing.rects["wood"]
     scene.maps.kd[r.row, r.col] = [0.25, 0.5, 0.75]
     write_scene(tmp_path / "again", scene)
-    assert np.array_equal(load_scene(tmp_path / "again").packing.unpack_atlas(scene.maps)["wood"].kd[0, 0],
-                          np.float32([0.25, 0.5, 0.75]))
+    assert np.array_equal(
+        load_scene(tmp_path / "again").packing.unpack_atlas(scene.maps)["wood"].kd[0, 0], np.float32([0.25, 0.5, 0.75])
+    )
 
 
 def test_a_v1_scene_still_loads_and_writes_as_v1(tmp_path):
@@ -73,19 +78,27 @@ def test_a_v1_scene_still_loads_and_writes_as_v1(tmp_path):
     assert json.loads((tmp_path / "v1" / "scene.json").read_text())["version"] == 1
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda d: d["objects"][0].update(material="stone"), "objects[0].material: expected one of the material sets"),
-    (lambda d: d["objects"][1].update(name="room"), "objects[1].name: expected a name no other object has"),
-    (lambda d: d["objects"][0].update(transform=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]),
-     "objects[0].transform: expected a transform that keeps orientation"),
-    (lambda d: d["objects"][0].update(transform=[[1, 0, 0], [0, 1, 0], [0, 0, 1]]), "objects[0].transform: expected"),
-    (lambda d: d["objects"][0].update(emission_sides="front"), "objects[0].emission_sides: expected one of"),
-    (lambda d: d["materials"]["wood"].pop("ka"), "materials.wood.ka: expected this required field"),
-    (lambda d: d["objects"][0].update(mesh="../room.ply"), "objects[0].mesh: expected a relative path"),
-    (lambda d: d["objects"][0].update(mesh="meshes/none.ply"), "objects[0].mesh: expected an existing file"),
-    (lambda d: d.pop("kg"), "kg: expected this required field"),
-    (lambda d: d.update(objects=[]), "objects: expected"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda d: d["objects"][0].update(material="stone"), "objects[0].material: expected one of the material sets"),
+        (lambda d: d["objects"][1].update(name="room"), "objects[1].name: expected a name no other object has"),
+        (
+            lambda d: d["objects"][0].update(transform=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]),
+            "objects[0].transform: expected a transform that keeps orientation",
+        ),
+        (
+            lambda d: d["objects"][0].update(transform=[[1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+            "objects[0].transform: expected",
+        ),
+        (lambda d: d["objects"][0].update(emission_sides="front"), "objects[0].emission_sides: expected one of"),
+        (lambda d: d["materials"]["wood"].pop("ka"), "materials.wood.ka: expected this required field"),
+        (lambda d: d["objects"][0].update(mesh="../room.ply"), "objects[0].mesh: expected a relative path"),
+        (lambda d: d["objects"][0].update(mesh="meshes/none.ply"), "objects[0].mesh: expected an existing file"),
+        (lambda d: d.pop("kg"), "kg: expected this required field"),
+        (lambda d: d.update(objects=[]), "objects: expected"),
+    ],
+)
 def test_bad_v2_documents_are_one_error_naming_the_field(v2_dir, change, message):
     _edit(v2_dir, change)
     assert message in _error(v2_dir)

@@ -54,10 +54,12 @@ def test_xatlas_hanging_on_a_huge_mesh_is_stopped_by_the_limit(monkeypatch):
 
 
 def test_sigterm_during_xatlas_ends_the_stage_at_once():
-    code = ("import sys, numpy as np; from invrender.cli import install_signal_handlers\n"
-            "from invrender.scene.atlas import unwrap\n"
-            "install_signal_handlers(); print('busy', flush=True)\n"
-            f"unwrap(np.array({octahedron(1e30)[0].tolist()}), np.array({octahedron(1)[1].tolist()}), resolution=64)\n")
+    code = (
+        "import sys, numpy as np; from invrender.cli import install_signal_handlers\n"
+        "from invrender.scene.atlas import unwrap\n"
+        "install_signal_handlers(); print('busy', flush=True)\n"
+        f"unwrap(np.array({octahedron(1e30)[0].tolist()}), np.array({octahedron(1)[1].tolist()}), resolution=64)\n"
+    )
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline() == "busy\n"

@@ -73,7 +73,10 @@ def test_ply_wedge_texcoords_split(tmp_path):
     verts = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
     faces = ["3 0 1 2 6 0 0 1 0 1 1", "3 0 2 3 6 0.5 0.5 1 1 0 1"]
     write_ascii_ply(
-        tmp_path / "w.ply", ["x", "y", "z"], verts, faces,
+        tmp_path / "w.ply",
+        ["x", "y", "z"],
+        verts,
+        faces,
         face_props="property list uchar int vertex_indices\nproperty list uchar float texcoord",
     )
     mesh = read_mesh(tmp_path / "w.ply")

@@ -28,7 +28,9 @@ def test_rectangles_are_apart_by_the_padding_and_inside_the_atlas():
     owner = np.full((H, W), -1)
     for k, (name, rect) in enumerate(packing.rects.items()):
         assert (rect.height, rect.width) == SHAPES[name]
-        grown = owner[max(rect.row - 2, 0) : rect.row + rect.height + 2, max(rect.col - 2, 0) : rect.col + rect.width + 2]
+        grown = owner[
+            max(rect.row - 2, 0) : rect.row + rect.height + 2, max(rect.col - 2, 0) : rect.col + rect.width + 2
+        ]
         assert np.all(grown == -1), name  # nobody within 2 texels
         assert rect.row >= 2 and rect.col >= 2 and rect.row + rect.height + 2 <= H and rect.col + rect.width + 2 <= W
         owner[rect.row : rect.row + rect.height, rect.col : rect.col + rect.width] = k
@@ -72,8 +74,10 @@ def test_flatten_transforms_concatenates_and_marks_ids_and_sides():
     sets = _sets(np.random.default_rng(4), {"p": (2, 3), "q": (3, 2)})
     cube = cube_mesh()
     T = rigid(30, (1.0, 0.5, -2.0))
-    objects = [SceneObject("a", cube, "p", T, instance_id=7),
-               SceneObject("b", cube, "q", np.diag([2.0, 2.0, 2.0, 1.0]), instance_id=9, emission_sides="one")]
+    objects = [
+        SceneObject("a", cube, "p", T, instance_id=7),
+        SceneObject("b", cube, "q", np.diag([2.0, 2.0, 2.0, 1.0]), instance_id=9, emission_sides="one"),
+    ]
     scene = pack_scene(objects, sets, np.zeros((6, 1, 1, 3), np.float32))
     n, f = len(cube.positions), len(cube.faces)
     assert np.allclose(scene.mesh.positions[:n], cube.positions @ T[:3, :3].T + T[:3, 3], atol=1e-6)
@@ -83,12 +87,18 @@ def test_flatten_transforms_concatenates_and_marks_ids_and_sides():
     assert np.array_equal(scene.mesh.one_sided, np.repeat([False, True], f))
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda o: o.__setattr__("material", "nope"), "objects[0].material: expected one of the material sets"),
-    (lambda o: o.__setattr__("transform", np.diag([1.0, 1.0, -1.0, 1.0])), "objects[0].transform: expected a transform that keeps"),
-    (lambda o: o.__setattr__("transform", np.ones((3, 3))), "objects[0].transform: expected a row-major 4x4"),
-    (lambda o: o.__setattr__("emission_sides", "both"), "objects[0].emission_sides: expected one of"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda o: o.__setattr__("material", "nope"), "objects[0].material: expected one of the material sets"),
+        (
+            lambda o: o.__setattr__("transform", np.diag([1.0, 1.0, -1.0, 1.0])),
+            "objects[0].transform: expected a transform that keeps",
+        ),
+        (lambda o: o.__setattr__("transform", np.ones((3, 3))), "objects[0].transform: expected a row-major 4x4"),
+        (lambda o: o.__setattr__("emission_sides", "both"), "objects[0].emission_sides: expected one of"),
+    ],
+)
 def test_bad_objects_are_refused(edit, message):
     obj = SceneObject("a", cube_mesh(), "p")
     edit(obj)
@@ -100,5 +110,8 @@ def test_an_object_without_uvs_is_refused():
     mesh = cube_mesh()
     mesh.uvs = None
     with pytest.raises(SceneError, match=r"objects\[0\]\.mesh \(a\): vertex s,t"):
-        pack_scene([SceneObject("a", mesh, "p")], _sets(np.random.default_rng(6), {"p": (2, 2)}),
-                   np.zeros((6, 1, 1, 3), np.float32))
+        pack_scene(
+            [SceneObject("a", mesh, "p")],
+            _sets(np.random.default_rng(6), {"p": (2, 2)}),
+            np.zeros((6, 1, 1, 3), np.float32),
+        )

@@ -11,9 +11,13 @@ from invrender.scene.types import SceneError
 
 
 def _doc(*transforms, registered=True):
-    return {"convention": "p_world = T_obj2world @ [p_obj, 1]",
-            "instances": [{"instance_id": k, "mask_value": k, "registered": registered, "T_obj2world": T.tolist()}
-                          for k, T in enumerate(transforms, 1)]}
+    return {
+        "convention": "p_world = T_obj2world @ [p_obj, 1]",
+        "instances": [
+            {"instance_id": k, "mask_value": k, "registered": registered, "T_obj2world": T.tolist()}
+            for k, T in enumerate(transforms, 1)
+        ],
+    }
 
 
 def _pose(angle, t):
@@ -37,13 +41,16 @@ def test_unregistered_copies_are_skipped():
     assert validate_poses(_doc(np.eye(4), registered=False), "poses.json") == []
 
 
-@pytest.mark.parametrize("edit, field", [
-    (lambda d: d["instances"][0].update(T_obj2world=(2 * np.eye(4)).tolist()), "instances[0].T_obj2world"),
-    (lambda d: d["instances"][0].update(T_obj2world=np.diag([1.0, 1, -1, 1]).tolist()), "instances[0].T_obj2world"),
-    (lambda d: d["instances"][0].update(T_obj2world=[[1, 0], [0, 1]]), "instances[0].T_obj2world"),
-    (lambda d: d["instances"][0].update(instance_id="one"), "instances[0].instance_id"),
-    (lambda d: d.pop("instances"), "instances"),
-])
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda d: d["instances"][0].update(T_obj2world=(2 * np.eye(4)).tolist()), "instances[0].T_obj2world"),
+        (lambda d: d["instances"][0].update(T_obj2world=np.diag([1.0, 1, -1, 1]).tolist()), "instances[0].T_obj2world"),
+        (lambda d: d["instances"][0].update(T_obj2world=[[1, 0], [0, 1]]), "instances[0].T_obj2world"),
+        (lambda d: d["instances"][0].update(instance_id="one"), "instances[0].instance_id"),
+        (lambda d: d.pop("instances"), "instances"),
+    ],
+)
 def test_bad_poses_are_one_scene_error_naming_the_field(tmp_path, edit, field):
     doc = _doc(np.eye(4))
     edit(doc)

@@ -10,7 +10,8 @@ from invrender.scene.cameras import read_colmap
 from invrender.scene.format import load_scene
 from invrender.scene.images import read_image, read_mask
 from invrender.scene.mesh_io import read_mesh
-from invrender.synthesize import make_duplicates, make_room, run as synthesize, write_capture
+from invrender.synthesize import make_duplicates, make_room, write_capture
+from invrender.synthesize import run as synthesize
 
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
 SMALL_DUPLICATES = {"count": 3, "atlas_resolution": 64, "camera": {"width": 48, "height": 36}}
@@ -33,8 +34,12 @@ class FakeRenderer:
         ids = self.ids[(xs // 4) % len(self.ids)].astype(np.int32)
         if self.bad_shape:
             radiance = radiance[:, :-1]
-        return {"radiance": radiance, "depth": np.ones((h, w), np.float32), "instance_id": ids,
-                "triangle_id": np.zeros((h, w), np.int32)}
+        return {
+            "radiance": radiance,
+            "depth": np.ones((h, w), np.float32),
+            "instance_id": ids,
+            "triangle_id": np.zeros((h, w), np.int32),
+        }
 
 
 def test_room_capture_layout(tmp_path):
@@ -92,8 +97,9 @@ def test_duplicates_capture_has_poses_and_object(tmp_path):
     assert len(obj.faces) == meta["object"]["face_count"]
     T = np.array(poses["instances"][1]["T_obj2world"])
     f0, f1 = meta["copies"][1]["faces"]
-    np.testing.assert_allclose(obj.positions[obj.faces] @ T[:3, :3].T + T[:3, 3],
-                               scene.mesh.positions[scene.mesh.faces[f0:f1]], atol=1e-5)
+    np.testing.assert_allclose(
+        obj.positions[obj.faces] @ T[:3, :3].T + T[:3, 3], scene.mesh.positions[scene.mesh.faces[f0:f1]], atol=1e-5
+    )
     assert read_mask(out / "ground_truth" / "masks" / "view_000.png").max() == 3
 
 
@@ -123,8 +129,9 @@ def test_real_renderer_masks_match_the_mesh(tmp_path):
     assert set(np.unique(ids)) == {0, 1, 2, 3}
     assert np.isfinite(out["radiance"]).all() and out["radiance"].mean() > 0
 
-    metadata = synthesize("duplicates", tmp_path / "capture", SMALL_DUPLICATES, spp=4,
-                          renderer_factory=lambda s: renderer)
+    metadata = synthesize(
+        "duplicates", tmp_path / "capture", SMALL_DUPLICATES, spp=4, renderer_factory=lambda s: renderer
+    )
     np.testing.assert_array_equal(read_mask(tmp_path / "capture" / "ground_truth" / "masks" / "view_000.png"), ids)
     assert metadata["poses"] == meta["poses"]
 
@@ -134,9 +141,9 @@ def test_real_renderer_sees_the_baked_emission():
     reports there (kd = ks = 0, so nothing is reflected): the atlas convention is the renderer's."""
     from scipy.ndimage import binary_erosion
 
-    from invrender.scene.atlas import texel_index
     from invrender.render import Renderer
     from invrender.render.analysis import analyse
+    from invrender.scene.atlas import texel_index
 
     scene, meta = make_room({"atlas_resolution": 128, "cameras": {"count": 2, "width": 48, "height": 36}})
     emitter = np.zeros(scene.mesh.triangle_count, bool)

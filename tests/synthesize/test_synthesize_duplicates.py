@@ -113,7 +113,7 @@ def test_camera_sees_every_copy(dup):
     cam = scene.cameras[0]
     assert cam.R[2] @ [0, -1, 0] > 0.5  # looking down
     for T in poses_of(meta):
-        (u, v), = project_points(cam, T[None, :3, 3])
+        ((u, v),) = project_points(cam, T[None, :3, 3])
         assert 0 < u < cam.width and 0 < v < cam.height
 
 

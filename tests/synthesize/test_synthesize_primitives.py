@@ -40,7 +40,9 @@ def test_box_is_closed_and_faces_outwards():
     for side, name in enumerate(BOX_SIDES):
         axis = np.zeros(3)
         axis["xyz".index(name[1])] = 1 if name[0] == "+" else -1
-        np.testing.assert_allclose(face_normals(b.positions, b.faces[b.part == side]), np.tile(axis, ((b.part == side).sum(), 1)), atol=1e-12)
+        np.testing.assert_allclose(
+            face_normals(b.positions, b.faces[b.part == side]), np.tile(axis, ((b.part == side).sum(), 1)), atol=1e-12
+        )
 
 
 def test_box_can_leave_sides_out():

@@ -151,7 +151,7 @@ def test_cameras_look_into_the_room(room):
         assert np.linalg.det(R) == pytest.approx(1)
         assert np.all(cam.center > lo) and np.all(cam.center < hi)
         assert R[1] @ [0, 1, 0] < 0  # OpenCV: image y points down, world +Y up
-        (u, v), = project_points(cam, centre[None])
+        ((u, v),) = project_points(cam, centre[None])
         assert 0 < u < cam.width and 0 < v < cam.height
         fov = 2 * np.degrees(np.arctan(cam.width / 2 / cam.focal[0]))
         assert 60 <= fov <= 70 and cam.model == "PINHOLE"

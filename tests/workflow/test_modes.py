@@ -31,20 +31,37 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     """One photograph (with masks, or with depth and a segmentation, or nothing else) is a valid
     duplicates or room capture; without cameras nothing can run yet, and the workflow says
     what each will get once its stages land."""
-    lay_out(tmp_path, [
-        "shelf/images/IMG_0001.jpg", "shelf/masks.png",
-        "boxes/images/a.exr", "boxes/images/a.png", "boxes/masks/1.png", "boxes/masks/2.png",
-        "tins/images/one.jpg", "tins/images/two.jpg",
-        "living/images/photo.exr", "living/depth.exr", "living/panoptic.png", "living/labels.json",
-        "bare/images/photo.png",
-    ])
+    lay_out(
+        tmp_path,
+        [
+            "shelf/images/IMG_0001.jpg",
+            "shelf/masks.png",
+            "boxes/images/a.exr",
+            "boxes/images/a.png",
+            "boxes/masks/1.png",
+            "boxes/masks/2.png",
+            "tins/images/one.jpg",
+            "tins/images/two.jpg",
+            "living/images/photo.exr",
+            "living/depth.exr",
+            "living/panoptic.png",
+            "living/labels.json",
+            "bare/images/photo.png",
+        ],
+    )
     scenes = {
         "shelf": {"mode": "duplicates", "capture": {"path": "shelf", "masks": "masks.png", "field_of_view": 60}},
         "boxes": {"mode": "duplicates", "capture": {"path": "boxes", "masks": "masks", "focal_length": 900}},
         "tins": {"mode": "duplicates", "capture": {"path": "tins", "image": "images/two.jpg"}},
-        "living": {"mode": "room", "capture": {
-            "path": "living", "depth": "depth.exr", "field_of_view": 70,
-            "segmentation": {"ids": "panoptic.png", "labels": "labels.json"}}},
+        "living": {
+            "mode": "room",
+            "capture": {
+                "path": "living",
+                "depth": "depth.exr",
+                "field_of_view": 70,
+                "segmentation": {"ids": "panoptic.png", "labels": "labels.json"},
+            },
+        },
         "bare": {"mode": "room", "capture": {"path": "bare"}},
     }
     result = dry_run(tmp_path, scenes)
@@ -61,11 +78,13 @@ def test_a_photograph_with_cameras_gets_the_cameras_rule_and_no_more(tmp_path):
     scenes = {"shelf": {"mode": "duplicates", "capture": {"path": "shelf"}}}
     assert job_counts(dry_run(tmp_path, scenes).stdout) == {"cameras": 1, "all": 1}
     # What needs a mesh or a scene directory says which stage will bring it.
-    for target, expected in [("results/shelf/geometry", "without a mesh"),
-                             ("results/shelf/renders", "nothing writes results/shelf/scene/ yet")]:
+    for target, expected in [
+        ("results/shelf/geometry", "without a mesh"),
+        ("results/shelf/renders", "nothing writes results/shelf/scene/ yet"),
+    ]:
         result = dry_run(tmp_path, scenes, target, check=False)
         assert result.returncode != 0
-        assert f"scene 'shelf' is a duplicates capture" in result.stdout and expected in result.stdout
+        assert "scene 'shelf' is a duplicates capture" in result.stdout and expected in result.stdout
         assert "(issue 13)" in result.stdout
 
 
@@ -83,32 +102,60 @@ PHOTOGRAPH = ["images/photo.jpg"]
 # name: (files under kitchen/, the scene's config, texts the message must hold)
 BAD_CAPTURES = {
     "a multiview scene without a mesh": (
-        MULTIVIEW, {"mode": "multiview"}, ["scenes.kitchen.capture.mesh", "neither mesh.ply nor mesh.obj"]),
+        MULTIVIEW,
+        {"mode": "multiview"},
+        ["scenes.kitchen.capture.mesh", "neither mesh.ply nor mesh.obj"],
+    ),
     "a named mesh that is not there": (
-        MULTIVIEW, {"mesh": "scans/room.ply"}, ["scenes.kitchen.capture.mesh", "kitchen/scans/room.ply"]),
+        MULTIVIEW,
+        {"mesh": "scans/room.ply"},
+        ["scenes.kitchen.capture.mesh", "kitchen/scans/room.ply"],
+    ),
     "a multiview scene without images": (
-        ["mesh.ply", *COLMAP], {}, ["scenes.kitchen.capture.path", "kitchen/images", "no images"]),
+        ["mesh.ply", *COLMAP],
+        {},
+        ["scenes.kitchen.capture.path", "kitchen/images", "no images"],
+    ),
     "a photograph among several, unnamed": (
-        ["images/a.jpg", "images/b.exr", "images/b.png"], {"mode": "duplicates"},
-        ["scenes.kitchen.capture.image", "kitchen/images", "2 images"]),
+        ["images/a.jpg", "images/b.exr", "images/b.png"],
+        {"mode": "duplicates"},
+        ["scenes.kitchen.capture.image", "kitchen/images", "2 images"],
+    ),
     "masks that are not there": (
-        PHOTOGRAPH, {"mode": "duplicates", "masks": "masks.png"}, ["scenes.kitchen.capture.masks", "kitchen/masks.png"]),
+        PHOTOGRAPH,
+        {"mode": "duplicates", "masks": "masks.png"},
+        ["scenes.kitchen.capture.masks", "kitchen/masks.png"],
+    ),
     "a masks folder without a PNG": (
-        [*PHOTOGRAPH, "masks/readme.txt"], {"mode": "duplicates", "masks": "masks"},
-        ["scenes.kitchen.capture.masks", "kitchen/masks", "no PNG"]),
+        [*PHOTOGRAPH, "masks/readme.txt"],
+        {"mode": "duplicates", "masks": "masks"},
+        ["scenes.kitchen.capture.masks", "kitchen/masks", "no PNG"],
+    ),
     "a key of another mode": (
-        [*PHOTOGRAPH, "depth.exr"], {"mode": "duplicates", "depth": "depth.exr"},
-        ["scenes.kitchen.capture.depth", "a duplicates scene takes no depth", "room"]),
+        [*PHOTOGRAPH, "depth.exr"],
+        {"mode": "duplicates", "depth": "depth.exr"},
+        ["scenes.kitchen.capture.depth", "a duplicates scene takes no depth", "room"],
+    ),
     "a depth map that is no EXR": (
-        [*PHOTOGRAPH, "depth.png"], {"mode": "room", "depth": "depth.png"}, ["scenes.kitchen.capture.depth", ".exr"]),
+        [*PHOTOGRAPH, "depth.png"],
+        {"mode": "room", "depth": "depth.png"},
+        ["scenes.kitchen.capture.depth", ".exr"],
+    ),
     "a segmentation without its labels": (
-        [*PHOTOGRAPH, "panoptic.png"], {"mode": "room", "segmentation": {"ids": "panoptic.png", "labels": "labels.json"}},
-        ["scenes.kitchen.capture.segmentation.labels", "kitchen/labels.json"]),
+        [*PHOTOGRAPH, "panoptic.png"],
+        {"mode": "room", "segmentation": {"ids": "panoptic.png", "labels": "labels.json"}},
+        ["scenes.kitchen.capture.segmentation.labels", "kitchen/labels.json"],
+    ),
     "a field of view beside a COLMAP model": (
-        [*PHOTOGRAPH, *COLMAP], {"mode": "room", "field_of_view": 60}, ["scenes.kitchen.capture.field_of_view", "sparse"]),
+        [*PHOTOGRAPH, *COLMAP],
+        {"mode": "room", "field_of_view": 60},
+        ["scenes.kitchen.capture.field_of_view", "sparse"],
+    ),
     "a field of view and a focal length": (
-        PHOTOGRAPH, {"mode": "room", "field_of_view": 60, "focal_length": 500},
-        ["scenes.kitchen.capture.focal_length", "not both"]),
+        PHOTOGRAPH,
+        {"mode": "room", "field_of_view": 60, "focal_length": 500},
+        ["scenes.kitchen.capture.focal_length", "not both"],
+    ),
 }
 
 

@@ -30,8 +30,18 @@ def write_transforms_json(cameras, path):
         c2w = np.eye(4)
         c2w[:3, :3] = cam.R.T @ GL_TO_CV
         c2w[:3, 3] = -cam.R.T @ cam.t
-        frames.append({"file_path": f"images/{cam.name}", "transform_matrix": c2w.tolist(),
-                       "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": cam.width, "h": cam.height})
+        frames.append(
+            {
+                "file_path": f"images/{cam.name}",
+                "transform_matrix": c2w.tolist(),
+                "fl_x": fx,
+                "fl_y": fy,
+                "cx": cx,
+                "cy": cy,
+                "w": cam.width,
+                "h": cam.height,
+            }
+        )
     path.write_text(json.dumps({"frames": frames}, indent=1))
 
 
@@ -109,7 +119,8 @@ def test_truth_scene_copies_the_ground_truth(built):
         assert (workdir / "results" / scene / "logs/truth_scene.log").read_text().count("->") >= len(files)
         assert (workdir / "results" / scene / "benchmarks/truth_scene.tsv").is_file()
     assert read_json(workdir / "results/cans/scene/poses.json") == read_json(
-        workdir / "results/cans/capture/ground_truth/poses.json")
+        workdir / "results/cans/capture/ground_truth/poses.json"
+    )
 
 
 def test_cameras_normalises_colmap_and_transforms_json(built):
@@ -163,8 +174,16 @@ def test_features_analyses_the_scene(built, test_config):
     result = snakemake(workdir, "--cores", "2", "results/room/features.json")
     assert job_counts(result.stdout) == {"features": 1}
     document = read_json(workdir / "results/room/features.json")
-    assert set(document["features"]) == {"specular", "emission", "emitter_sampling", "environment", "window",
-                                         "env_sampling", "one_sided", "max_bounces"}
+    assert set(document["features"]) == {
+        "specular",
+        "emission",
+        "emitter_sampling",
+        "environment",
+        "window",
+        "env_sampling",
+        "one_sided",
+        "max_bounces",
+    }
     # The room has ceiling lights, a window and a glossy table.
     assert document["features"]["emission"] and document["features"]["window"] and document["features"]["specular"]
     settings = document["evidence"]["settings"]
@@ -211,8 +230,9 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
 
     workdir, _ = built
     snakemake(workdir, "--cores", "2", "results/room/scene", "results/cans/scene")  # upstream, if not built here yet
-    result = snakemake(workdir, "--cores", "2", "-p", "results/room/export", "results/cans/export",
-                       "--config", "export={usdc: true}")
+    result = snakemake(
+        workdir, "--cores", "2", "-p", "results/room/export", "results/cans/export", "--config", "export={usdc: true}"
+    )
     assert job_counts(result.stdout) == {"export": 2}
     assert "--poses results/cans/scene/poses.json" in result.stdout
     for scene in ("room", "cans"):

@@ -15,8 +15,16 @@ import pytest
 import yaml
 from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
 
-RULE_OF_OUTPUT = {"capture": "synthesize", "cameras": "cameras", "geometry": "geometry", "gradients": "gradients",
-                  "scene": "truth_scene", "features.json": "features", "renders": "render", "export": "export"}
+RULE_OF_OUTPUT = {
+    "capture": "synthesize",
+    "cameras": "cameras",
+    "geometry": "geometry",
+    "gradients": "gradients",
+    "scene": "truth_scene",
+    "features.json": "features",
+    "renders": "render",
+    "export": "export",
+}
 OUTPUTS = tuple(RULE_OF_OUTPUT)
 
 
@@ -26,8 +34,15 @@ def complete(tmp_path_factory):
     workdir = tmp_path_factory.mktemp("complete")
     result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "truth_scene": 2, "features": 2, "render": 2,
-        "export": 2, "all": 1,
+        "synthesize": 2,
+        "cameras": 2,
+        "geometry": 2,
+        "gradients": 2,
+        "truth_scene": 2,
+        "features": 2,
+        "render": 2,
+        "export": 2,
+        "all": 1,
     }
     return workdir
 
@@ -111,11 +126,23 @@ def _leftovers(workdir: Path) -> list[str]:
 
 def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
     """Ctrl-C (SIGINT to the process group) while a downstream job runs, then run again."""
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(SNAKEFILE), "--directory", str(tmp_path),
-           "--configfile", str(TEST_CONFIG), "--workflow-profile", str(LOCAL_PROFILE)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(SNAKEFILE),
+        "--directory",
+        str(tmp_path),
+        "--configfile",
+        str(TEST_CONFIG),
+        "--workflow-profile",
+        str(LOCAL_PROFILE),
+    ]
     with open(tmp_path / "first.log", "w") as log:
-        process = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=snakemake_env(),
-                                   start_new_session=True)
+        process = subprocess.Popen(
+            cmd, stdout=log, stderr=subprocess.STDOUT, env=snakemake_env(), start_new_session=True
+        )
         try:
             deadline = time.monotonic() + 300
             # features runs after the capture and the scene it reads: wait until one starts.
@@ -140,8 +167,9 @@ def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
 
     result = snakemake(tmp_path, "--workflow-profile", LOCAL_PROFILE)
     # Exactly the jobs whose outputs were missing run again, the killed one among them.
-    missing = [f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS
-               if f"results/{s}/{name}" not in before]
+    missing = [
+        f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS if f"results/{s}/{name}" not in before
+    ]
     expected = {}
     for path in missing:
         rule = RULE_OF_OUTPUT[path.rsplit("/", 1)[1]]

@@ -8,9 +8,9 @@ import importlib.util
 import re
 import subprocess
 import sys
-import tomllib
 
 import pytest
+import tomllib
 import yaml
 from workflow_helpers import REPO, TEST_CONFIG, job_counts, snakemake
 
@@ -28,16 +28,40 @@ def test_lint_is_clean(tmp_path):
 
 def test_snakefmt_check():
     paths = [REPO / "Snakefile", REPO / "workflow" / "rules"]
-    result = subprocess.run([sys.executable, "-m", "snakefmt", "--check", *map(str, paths)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "snakefmt", "--check", *map(str, paths)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     assert result.returncode == 0, result.stdout
+
+
+@pytest.mark.parametrize("command", [["format", "--check", "--diff"], ["check"]], ids=["format", "lint"])
+def test_python_follows_ruff(command):
+    """The formatter's style and the lint (pyproject.toml [tool.ruff]) over the package and tests."""
+    result = subprocess.run(
+        [sys.executable, "-m", "ruff", *command, "workflow", "tests"],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    assert result.returncode == 0, result.stdout[-3000:]
 
 
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     assert job_counts(result.stdout) == {
-        "synthesize": 2, "cameras": 2, "geometry": 2, "gradients": 2, "truth_scene": 2, "features": 2, "render": 2,
-        "export": 2, "all": 1,
+        "synthesize": 2,
+        "cameras": 2,
+        "geometry": 2,
+        "gradients": 2,
+        "truth_scene": 2,
+        "features": 2,
+        "render": 2,
+        "export": 2,
+        "all": 1,
     }
 
 
@@ -46,8 +70,17 @@ def test_rulegraph_picture_is_current(tmp_path):
     result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
     rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
     svg = (REPO / "docs" / "rulegraph.svg").read_text()
-    assert rules == {"all", "synthesize", "cameras", "geometry", "gradients", "truth_scene", "features", "render",
-                     "export"}
+    assert rules == {
+        "all",
+        "synthesize",
+        "cameras",
+        "geometry",
+        "gradients",
+        "truth_scene",
+        "features",
+        "render",
+        "export",
+    }
     for rule in rules:
         assert f">{rule}</text>" in svg
 
@@ -117,8 +150,10 @@ def test_config_readme_generator_rejects_a_template_without_its_tables(tmp_path)
 BAD_CONFIGS = {
     "typo in a section": (
         {"geometry": {"target_face": 1000}},
-        ["config: geometry.target_face: unknown key; allowed: target_faces, atlas_resolution, texels_per_meter, "
-         "padding, poisson_depth"],
+        [
+            "config: geometry.target_face: unknown key; allowed: target_faces, atlas_resolution, texels_per_meter, "
+            "padding, poisson_depth"
+        ],
     ),
     "typo at the top": (
         {"render": {"spp": 4}, "scene": {}},
@@ -266,14 +301,23 @@ def _resources_by_rule(output: str) -> dict[str, str]:
 @pytest.mark.parametrize("device, gpus", [("NVIDIA", 1), ("pocl", 0), (None, 0)])
 def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
     import snakemake_executor_plugin_slurm  # noqa: F401  (a test extra: the profile needs it)
+
     args = ["-n", "--workflow-profile", SLURM_PROFILE]
     if device:
         args += ["--config", f"device={device}"]
     result = snakemake(tmp_path, *args)
     resources = _resources_by_rule(result.stdout)
     resources.pop("all", None)
-    assert set(resources) == {"synthesize", "cameras", "geometry", "gradients", "truth_scene", "features", "render",
-                              "export"}
+    assert set(resources) == {
+        "synthesize",
+        "cameras",
+        "geometry",
+        "gradients",
+        "truth_scene",
+        "features",
+        "render",
+        "export",
+    }
     for rule, line in resources.items():
         assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line
         if rule in RAY_TRACING_RULES:

@@ -36,8 +36,15 @@ def snakemake(workdir, *args, config=TEST_CONFIG, check=True, timeout=600, env=N
     if config is not None:
         cmd += ["--configfile", *map(str, [config] if isinstance(config, (str, Path)) else config)]
     cmd += [str(a) for a in args]
-    result = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**snakemake_env(), **(env or {})}, timeout=timeout, **popen)
+    result = subprocess.run(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**snakemake_env(), **(env or {})},
+        timeout=timeout,
+        **popen,
+    )
     if check and result.returncode != 0:
         raise AssertionError(f"snakemake {' '.join(cmd[6:])} failed ({result.returncode}):\n{result.stdout[-6000:]}")
     return result

@@ -57,8 +57,17 @@ def cmd_features(args):
 def cmd_render(args):
     from .renders import stage
 
-    stage.run(args.scene, args.out, args.features, spp=args.spp, seed=args.seed, cameras=args.camera,
-              device=args.device, max_bounces=args.max_bounces, overrides=_key_values(args.set))
+    stage.run(
+        args.scene,
+        args.out,
+        args.features,
+        spp=args.spp,
+        seed=args.seed,
+        cameras=args.camera,
+        device=args.device,
+        max_bounces=args.max_bounces,
+        overrides=_key_values(args.set),
+    )
 
 
 def cmd_cameras(args):
@@ -76,10 +85,18 @@ def cmd_geometry(args):
     # wait for them: the stage runs in a child process that a signal here kills at once; the
     # temporary output that the killed child leaves is swept right away.
     try:
-        call_isolated(stage.run, args.source, args.out, target_faces=args.target_faces,
-                      texels_per_meter=args.texels_per_meter, atlas_resolution=args.atlas_resolution,
-                      padding=args.padding, poisson_depth=args.poisson_depth, threads=args.threads,
-                      what="geometry")
+        call_isolated(
+            stage.run,
+            args.source,
+            args.out,
+            target_faces=args.target_faces,
+            texels_per_meter=args.texels_per_meter,
+            atlas_resolution=args.atlas_resolution,
+            padding=args.padding,
+            poisson_depth=args.poisson_depth,
+            threads=args.threads,
+            what="geometry",
+        )
     finally:
         sweep_stale(args.out)
 
@@ -87,8 +104,18 @@ def cmd_geometry(args):
 def cmd_gradients(args):
     from .gradients import stage
 
-    stage.run(args.geometry, args.cameras, args.images, args.out, batch=args.batch, spp=args.spp,
-              seed=args.seed, iteration=args.iteration, device=args.device, accumulation=args.accumulation)
+    stage.run(
+        args.geometry,
+        args.cameras,
+        args.images,
+        args.out,
+        batch=args.batch,
+        spp=args.spp,
+        seed=args.seed,
+        iteration=args.iteration,
+        device=args.device,
+        accumulation=args.accumulation,
+    )
 
 
 def cmd_export(args):
@@ -100,8 +127,16 @@ def cmd_export(args):
 def cmd_import(args):
     from .import_ import stage
 
-    stage.run(args.source, args.out, cameras=args.cameras, environment=args.environment, cube_size=args.cube_size,
-              emission_sides=args.emission_sides, windows=tuple(args.window or ()), max_atlas=args.max_atlas)
+    stage.run(
+        args.source,
+        args.out,
+        cameras=args.cameras,
+        environment=args.environment,
+        cube_size=args.cube_size,
+        emission_sides=args.emission_sides,
+        windows=tuple(args.window or ()),
+        max_atlas=args.max_atlas,
+    )
 
 
 def cmd_import_usd(args):
@@ -148,8 +183,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--features", help="features.json (default: analyse the scene)")
     p.add_argument("--max-bounces", type=int, help="bounce limit (overrides the features' max_bounces)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a feature after analysis, e.g. specular=false (repeatable)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a feature after analysis, e.g. specular=false (repeatable)",
+    )
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--camera", action="append", help="render only this camera (repeatable)")
@@ -161,7 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="directory to write the COLMAP text model to")
     p.set_defaults(func=cmd_cameras)
 
-    p = stages.add_parser("geometry", help="clean/reconstruct, simplify, unwrap a mesh or point cloud -> mesh.ply, atlas.npz")
+    p = stages.add_parser(
+        "geometry", help="clean/reconstruct, simplify, unwrap a mesh or point cloud -> mesh.ply, atlas.npz"
+    )
     p.add_argument("source", help="PLY/OBJ triangle mesh, or PLY point cloud with normals (meters, +Y up)")
     p.add_argument("--out", required=True, help="directory to write (mesh.ply, atlas.npz, geometry.json)")
     p.add_argument("--target-faces", type=int, default=20000, help="quadric simplification target (MILO: 20K)")
@@ -182,8 +223,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--iteration", type=int, default=0, help="which batch of the seed's sequence")
-    p.add_argument("--accumulation", choices=["fixed", "buckets"], default="fixed",
-                   help="fixed: 64-bit fixed point, bitwise reproducible; buckets: MILO's float copies")
+    p.add_argument(
+        "--accumulation",
+        choices=["fixed", "buckets"],
+        default="fixed",
+        help="fixed: 64-bit fixed point, bitwise reproducible; buckets: MILO's float copies",
+    )
     p.add_argument("--device")
     p.set_defaults(func=cmd_gradients)
 
@@ -198,21 +243,32 @@ def build_parser() -> argparse.ArgumentParser:
     p = stages.add_parser("import", help="textured OBJ files + a lat-long environment + cameras -> a scene directory")
     p.add_argument("source", help="a folder of .obj files (with their mtllib and images), or one .obj")
     p.add_argument("--out", required=True, help="scene directory to write")
-    p.add_argument("--cameras", help="COLMAP model or transforms.json (default: SOURCE/sparse or SOURCE/transforms.json)")
+    p.add_argument(
+        "--cameras", help="COLMAP model or transforms.json (default: SOURCE/sparse or SOURCE/transforms.json)"
+    )
     p.add_argument("--environment", help="lat-long environment map (EXR or PNG, +Y up); default: black")
     p.add_argument("--cube-size", type=int, default=64, help="kg cube-map face size in texels")
-    p.add_argument("--emission-sides", choices=["one", "two"], default="one",
-                   help="emitters light their front only (as Mitsuba, Cycles, USD) or both sides")
-    p.add_argument("--window", action="append", metavar="MATERIAL",
-                   help="a material that is an opening onto the environment (kw = 1); repeatable")
+    p.add_argument(
+        "--emission-sides",
+        choices=["one", "two"],
+        default="one",
+        help="emitters light their front only (as Mitsuba, Cycles, USD) or both sides",
+    )
+    p.add_argument(
+        "--window",
+        action="append",
+        metavar="MATERIAL",
+        help="a material that is an opening onto the environment (kw = 1); repeatable",
+    )
     p.add_argument("--max-atlas", type=int, default=2048, help="largest atlas side of one material set")
     p.set_defaults(func=cmd_import)
 
     p = stages.add_parser("import-usd", help="a USD stage written by `export` (perhaps edited) -> a scene directory")
     p.add_argument("usd", help="scene.usda or scene.usdc")
     p.add_argument("--out", required=True, help="scene directory to write")
-    p.add_argument("--standard-only", action="store_true",
-                   help="ignore the invrender: attributes: the scene other USD tools see")
+    p.add_argument(
+        "--standard-only", action="store_true", help="ignore the invrender: attributes: the scene other USD tools see"
+    )
     p.set_defaults(func=cmd_import_usd)
 
     from .bench import BENCHMARKS
@@ -339,8 +395,14 @@ def main(argv=None) -> int:
     except Exception as error:  # a bug: the user sees one line, the log has the traceback
         where = _bug_log(args, handlers)
         first = (str(error).splitlines() or [""])[0]  # one line: the rest is in the traceback
-        log.error("invrender %s failed: %s: %s (a bug; the traceback is in %s)", args.stage,
-                  type(error).__name__, first, where, exc_info=True)
+        log.error(
+            "invrender %s failed: %s: %s (a bug; the traceback is in %s)",
+            args.stage,
+            type(error).__name__,
+            first,
+            where,
+            exc_info=True,
+        )
         return 1
     finally:
         for handler in handlers:

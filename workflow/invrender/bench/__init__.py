@@ -25,5 +25,8 @@ def run_benchmark(what: str, args) -> dict:
     if what not in BENCHMARKS:
         raise ValueError(f"bench: expected one of {list(BENCHMARKS)}, got {what!r}")
     run = importlib.import_module(f".{what}", __name__).run
-    return run(quick=bool(getattr(args, "quick", False)), out=getattr(args, "out", "docs/benchmarks"),
-               device=getattr(args, "device", None))
+    return run(
+        quick=bool(getattr(args, "quick", False)),
+        out=getattr(args, "out", "docs/benchmarks"),
+        device=getattr(args, "device", None),
+    )

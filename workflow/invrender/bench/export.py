@@ -35,7 +35,7 @@ from ..scene.format import load_scene, write_scene
 from ..scene.regions import classify_faces
 from ..scene.types import Maps, Scene
 from ..synthesize import make_duplicates, make_room
-from .harness import start_run, machine_info, write_report
+from .harness import machine_info, start_run, write_report
 
 log = logging.getLogger("invrender.bench")
 
@@ -50,8 +50,9 @@ class Settings:
 
 
 FULL = Settings("full")
-QUICK = Settings("quick", spp=2, mitsuba_spp=1, mitsuba_views=1,
-                 room_config=(("cameras", {"count": 2, "width": 32, "height": 24}),))
+QUICK = Settings(
+    "quick", spp=2, mitsuba_spp=1, mitsuba_views=1, room_config=(("cameras", {"count": 2, "width": 32, "height": 24}),)
+)
 
 
 def scalar_settings(settings: Settings) -> Settings:
@@ -88,8 +89,11 @@ def _with_maps(scene: Scene, **maps) -> Scene:
 
 def round_trips(root: Path, spp: int, room_config: dict) -> list[dict]:
     rows = []
-    for name, make, config, options in (("room", make_room, room_config, {}), ("cans", make_duplicates, {}, {}),
-                                        ("cans, --no-instancing", make_duplicates, {}, {"instancing": False})):
+    for name, make, config, options in (
+        ("room", make_room, room_config, {}),
+        ("cans", make_duplicates, {}, {}),
+        ("cans, --no-instancing", make_duplicates, {}, {"instancing": False}),
+    ):
         scene, metadata = make(dict(config))
         key = name.split(",")[0]
         write_scene(root / key, scene, metadata)
@@ -100,9 +104,13 @@ def round_trips(root: Path, spp: int, room_config: dict) -> list[dict]:
         back = load_scene(root / f"{key}_back")
         features = analyse(baseline)
         a, b = _render(baseline, features, spp, 1), _render(back, features, spp, 1)
-        rows.append(_row(name, a, b) | {
-            "max_abs_diff": max(float(np.abs(x - y).max()) for x, y in zip(a, b)),
-            "positions_max_diff_m": float(np.abs(baseline.mesh.positions - back.mesh.positions).max())})
+        rows.append(
+            _row(name, a, b)
+            | {
+                "max_abs_diff": max(float(np.abs(x - y).max()) for x, y in zip(a, b)),
+                "positions_max_diff_m": float(np.abs(baseline.mesh.positions - back.mesh.positions).max()),
+            }
+        )
     return rows
 
 
@@ -129,13 +137,23 @@ def standard_view(root: Path, spp: int) -> list[dict]:
     lamps = _render(_with_maps(original, ke=standard.maps.ke), features, spp, 1)
     return [
         _row("nothing, another seed (noise floor)", reference, _render(original, features, spp, 2)),
-        _row("ka = roughness^4 (float32 rounding)", reference,
-             _render(_with_maps(original, ka=standard.maps.ka), features, spp, 1)),
+        _row(
+            "ka = roughness^4 (float32 rounding)",
+            reference,
+            _render(_with_maps(original, ka=standard.maps.ka), features, spp, 1),
+        ),
         _row("lamps at their mean radiance (ke)", reference, lamps),
-        _row("the same, pixels that see a lamp directly left out", reference, lamps,
-             _not_seeing_lamps(original, features)),
-        _row("cameras from the USD lens (float32)", reference,
-             _render(Scene(original.mesh, original.maps, standard.cameras), features, spp, 1)),
+        _row(
+            "the same, pixels that see a lamp directly left out",
+            reference,
+            lamps,
+            _not_seeing_lamps(original, features),
+        ),
+        _row(
+            "cameras from the USD lens (float32)",
+            reference,
+            _render(Scene(original.mesh, original.maps, standard.cameras), features, spp, 1),
+        ),
         _row("all of the standard view", reference, _render(standard, features, spp, 1)),
     ]
 
@@ -163,20 +181,31 @@ def ggx_in_mitsuba(root: Path, spp: int, variant: str, views: int | None) -> lis
 
 
 TABLES = {
-    "round_trip": ("Round trip: export, import, render with the same seed", [
-        ("what", "scene", "s"), ("psnr_db", "PSNR per view, dB", "s"), ("max_abs_diff", "max abs difference", ".3g"),
-        ("positions_max_diff_m", "positions [m]", ".3g")]),
-    "standard_view": ("Standard view (import-usd --standard-only), the room, our renderer", [
-        ("what", "what differs", "s"), ("psnr_db", "PSNR per view, dB", "s")]),
-    "ggx": ("The roughness mapping in a GGX renderer: Mitsuba 3, the room", [
-        ("what", "what differs", "s"), ("psnr_db", "PSNR per view, dB", "s")]),
+    "round_trip": (
+        "Round trip: export, import, render with the same seed",
+        [
+            ("what", "scene", "s"),
+            ("psnr_db", "PSNR per view, dB", "s"),
+            ("max_abs_diff", "max abs difference", ".3g"),
+            ("positions_max_diff_m", "positions [m]", ".3g"),
+        ],
+    ),
+    "standard_view": (
+        "Standard view (import-usd --standard-only), the room, our renderer",
+        [("what", "what differs", "s"), ("psnr_db", "PSNR per view, dB", "s")],
+    ),
+    "ggx": (
+        "The roughness mapping in a GGX renderer: Mitsuba 3, the room",
+        [("what", "what differs", "s"), ("psnr_db", "PSNR per view, dB", "s")],
+    ),
 }
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
     """The three tables; `device` is not used (our renders take the default device)."""
-    settings, out, variant, notes, started, load_start = start_run("export", QUICK if quick else FULL, out,
-                                                                    scalar_settings)
+    settings, out, variant, notes, started, load_start = start_run(
+        "export", QUICK if quick else FULL, out, scalar_settings
+    )
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         results = {"round_trip": round_trips(root, settings.spp, dict(settings.room_config))}
@@ -185,10 +214,20 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     machine = machine_info(device)
     machine["load_average_start"] = load_start
     machine["load_average_end"] = os.getloadavg()
-    report = {"benchmark": "export", "mode": settings.mode, "mitsuba_variant": variant, "settings": asdict(settings),
-              "machine": machine, "seconds": time.time() - started, "notes": notes, **results}
+    report = {
+        "benchmark": "export",
+        "mode": settings.mode,
+        "mitsuba_variant": variant,
+        "settings": asdict(settings),
+        "machine": machine,
+        "seconds": time.time() - started,
+        "notes": notes,
+        **results,
+    }
     views = "all" if settings.mitsuba_views is None else settings.mitsuba_views
-    title = (f"# invrender bench export ({settings.mode}; our renders {settings.spp} spp; Mitsuba {variant} "
-             f"{settings.mitsuba_spp} spp, {views} room views; {report['seconds']:.0f} s)")
+    title = (
+        f"# invrender bench export ({settings.mode}; our renders {settings.spp} spp; Mitsuba {variant} "
+        f"{settings.mitsuba_spp} spp, {views} room views; {report['seconds']:.0f} s)"
+    )
     write_report(out, "export", title, report, TABLES, tuple(TABLES))
     return report

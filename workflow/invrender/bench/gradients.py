@@ -71,8 +71,22 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .harness import (PeakRSS, choose_variant, clock, fit_model, machine_info, median, model_time, next_seed_block,
-                      plot, quiet_pyopencl, room_scene, time_at_rmse, verdict, write_report)
+from .harness import (
+    PeakRSS,
+    choose_variant,
+    clock,
+    fit_model,
+    machine_info,
+    median,
+    model_time,
+    next_seed_block,
+    plot,
+    quiet_pyopencl,
+    room_scene,
+    time_at_rmse,
+    verdict,
+    write_report,
+)
 
 log = logging.getLogger("invrender.bench")
 
@@ -104,8 +118,20 @@ class Settings:
 
 
 FULL = Settings("full", repeats=7)
-QUICK = Settings("quick", width=32, height=24, bounces=(3,), ladder=(1, 2, 4), repeats=2, ref_spp=64,
-                 ref_pass_spp=16, target_spp=16, memory_side=32, accumulation_spp=2, accumulation_repeats=2)
+QUICK = Settings(
+    "quick",
+    width=32,
+    height=24,
+    bounces=(3,),
+    ladder=(1, 2, 4),
+    repeats=2,
+    ref_spp=64,
+    ref_pass_spp=16,
+    target_spp=16,
+    memory_side=32,
+    accumulation_spp=2,
+    accumulation_repeats=2,
+)
 
 
 def has_accumulation() -> bool:
@@ -205,10 +231,15 @@ class InvrenderGradient:
         adjoint = 2.0 * (radiance - self.target) / self.target.size  # d mean((L - T)^2) / dL
         options = {"accumulation": accumulation} if accumulation != "fixed" else {}
         with _counting_adjoint_runs() as runs:
-            grads = backward(self.renderer, cameras, self.requests, adjoint, int(spp),
-                             backward_seed(self._seed), **options)
-        self.last = {"forward_s": forward, "backward_s": time.perf_counter() - wall - forward,
-                     "adjoint_runs": len(runs) or None, "last_run_s": runs[-1] if runs else None}
+            grads = backward(
+                self.renderer, cameras, self.requests, adjoint, int(spp), backward_seed(self._seed), **options
+            )
+        self.last = {
+            "forward_s": forward,
+            "backward_s": time.perf_counter() - wall - forward,
+            "adjoint_runs": len(runs) or None,
+            "last_run_s": runs[-1] if runs else None,
+        }
         return np.asarray(grads["kd"], np.float64)
 
     def backward_alone(self, spp: int, image: np.ndarray) -> np.ndarray:
@@ -238,8 +269,14 @@ class MitsubaGradient:
 
         self.mi, self.dr, self.one_time = mi, dr, {}
         scene_dict, self.one_time["convert_s"], _ = clock(
-            bridge.scene_to_mitsuba_diffuse, scene, camera, bounces, 1, variant,
-            integrator=bridge.prb_integrator(bounces))
+            bridge.scene_to_mitsuba_diffuse,
+            scene,
+            camera,
+            bounces,
+            1,
+            variant,
+            integrator=bridge.prb_integrator(bounces),
+        )
         self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
         self.params = mi.traverse(self.scene)
         self.key = bridge.kd_parameter(self.params)
@@ -271,8 +308,9 @@ class MitsubaGradient:
         mi, dr = self.mi, self.dr
         self._seed += 1
         adjoint = 2.0 * (np.asarray(image, np.float32) - np.array(self.target, np.float32)) / image.size
-        self.scene.integrator().render_backward(self.scene, self.params, mi.TensorXf(adjoint.astype(np.float32)),
-                                                seed=self._seed % 2**32, spp=int(spp))
+        self.scene.integrator().render_backward(
+            self.scene, self.params, mi.TensorXf(adjoint.astype(np.float32)), seed=self._seed % 2**32, spp=int(spp)
+        )
         grad = np.array(dr.grad(self.params[self.key]), np.float64)
         dr.set_grad(self.params[self.key], 0.0)
         return grad
@@ -322,9 +360,12 @@ def reference(runners, settings: Settings, covered: np.ndarray, desc: str):
         a, b = (np.mean(h, 0) for h in halves)
         dirs = [np.sum(g) * START_KD for h in halves for g in h]  # sum(kd * grad), kd = START_KD on covered texels
         converged[runner.name] = {
-            "grad": (a + b) / 2, "noise_mse": max(float(np.mean((a - b) ** 2) / 4.0), 1e-300),
-            "directional": float(np.mean(dirs)), "directional_var": float(np.var(dirs, ddof=1) / len(dirs)),
-            "spp": passes * settings.ref_pass_spp, "seconds": float(np.sum(walls)),
+            "grad": (a + b) / 2,
+            "noise_mse": max(float(np.mean((a - b) ** 2) / 4.0), 1e-300),
+            "directional": float(np.mean(dirs)),
+            "directional_var": float(np.var(dirs, ddof=1) / len(dirs)),
+            "spp": passes * settings.ref_pass_spp,
+            "seconds": float(np.sum(walls)),
             "image": np.mean(images, 0),
             "image_mean": float(np.mean(images)),
             "image_mean_var": float((np.mean(images[0::2]) - np.mean(images[1::2])) ** 2 / 4.0),
@@ -348,9 +389,14 @@ def reference_agreement(converged: dict) -> dict:
     sigma = math.sqrt(a["directional_var"] + b["directional_var"]) / abs(b["directional"])
     image_diff = (a["image_mean"] - b["image_mean"]) / b["image_mean"]
     image_sigma = math.sqrt(a["image_mean_var"] + b["image_mean_var"]) / b["image_mean"]
-    return {"mean_rel_diff": diff, "mean_rel_sigma": sigma, "image_rel_diff": image_diff, "image_rel_sigma": image_sigma,
-            "texel_mse_over_noise": mse / (a["noise_mse"] + b["noise_mse"]),
-            "excess_rel_rmse": math.sqrt(max(0.0, mse - a["noise_mse"] - b["noise_mse"])) / rms}
+    return {
+        "mean_rel_diff": diff,
+        "mean_rel_sigma": sigma,
+        "image_rel_diff": image_diff,
+        "image_rel_sigma": image_sigma,
+        "texel_mse_over_noise": mse / (a["noise_mse"] + b["noise_mse"]),
+        "excess_rel_rmse": math.sqrt(max(0.0, mse - a["noise_mse"] - b["noise_mse"])) / rms,
+    }
 
 
 def equal_error(true, start, covered, camera, bounces: int, settings: Settings, variant: str, device=None):
@@ -376,7 +422,7 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
     jobs = [(spp, rep) for spp in settings.ladder for rep in range(settings.repeats)]
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]  # as bench render
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="pass", leave=False):
-        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+        for runner in runners if rep % 2 == 0 else runners[::-1]:
             grad, wall, cpu = clock(runner.gradient, spp)
             mse = float(np.mean((grad[covered] - ref) ** 2))
             records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse, **runner.last})
@@ -386,7 +432,7 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
     top_spp = settings.ladder[-1]
     alone = {runner.name: [] for runner in runners}
     for rep in tqdm(range(settings.repeats), desc=f"backward alone B={bounces}", leave=False):
-        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+        for runner in runners if rep % 2 == 0 else runners[::-1]:
             grad = runner.backward_alone(top_spp, forward_image)
             alone[runner.name].append(float(np.mean((grad[covered] - ref) ** 2)))
 
@@ -399,40 +445,75 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
             walls = [r["wall"] for r in mine]
             mse_raw = float(np.mean([r["mse"] for r in mine]))
             mse = max(mse_raw - ref_noise, 1e-3 * mse_raw)  # the reference's own noise removed
-            rows.append({"section": "curves", "bounces": bounces, "renderer": runner.name, "spp": spp,
-                         "wall_s": median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
-                         "cpu_s": median([r["cpu"] for r in mine]),
-                         "forward_s": median([r["forward_s"] for r in mine]),
-                         "backward_s": median([r["backward_s"] for r in mine]),
-                         "adjoint_runs": _mean_or_none([r.get("adjoint_runs") for r in mine]),
-                         "rmse": math.sqrt(mse), "rmse_raw": math.sqrt(mse_raw), "rel_rmse": math.sqrt(mse) / ref_rms,
-                         "repeats": len(mine)})
+            rows.append(
+                {
+                    "section": "curves",
+                    "bounces": bounces,
+                    "renderer": runner.name,
+                    "spp": spp,
+                    "wall_s": median(walls),
+                    "wall_min_s": min(walls),
+                    "wall_max_s": max(walls),
+                    "cpu_s": median([r["cpu"] for r in mine]),
+                    "forward_s": median([r["forward_s"] for r in mine]),
+                    "backward_s": median([r["backward_s"] for r in mine]),
+                    "adjoint_runs": _mean_or_none([r.get("adjoint_runs") for r in mine]),
+                    "rmse": math.sqrt(mse),
+                    "rmse_raw": math.sqrt(mse_raw),
+                    "rel_rmse": math.sqrt(mse) / ref_rms,
+                    "repeats": len(mine),
+                }
+            )
         curves += rows
         top = rows[-1]
         summary[runner.name] = {
-            "times": [r["wall_s"] for r in rows], "rmses": [r["rmse"] for r in rows],
-            "cpu_times": [r["cpu_s"] for r in rows], "top": top,
-            "samples_per_s": pixels * top["spp"] / top["wall_s"], "cpu_per_wall": top["cpu_s"] / top["wall_s"],
+            "times": [r["wall_s"] for r in rows],
+            "rmses": [r["rmse"] for r in rows],
+            "cpu_times": [r["cpu_s"] for r in rows],
+            "top": top,
+            "samples_per_s": pixels * top["spp"] / top["wall_s"],
+            "cpu_per_wall": top["cpu_s"] / top["wall_s"],
             "var_per_sample": top["rmse"] ** 2 * top["spp"],
             "backward_var_per_sample": max(float(np.mean(alone[runner.name])) - ref_noise, 0.0) * top_spp,
         }
     s_inv = summary["invrender"]
-    row = {"section": "equal_error", "bounces": bounces, "mitsuba_variant": variant, "width": camera.width,
-           "height": camera.height, "ref_rms": ref_rms, "ref_noise_rel_rmse": math.sqrt(ref_noise) / ref_rms,
-           "samples_per_s_invrender": s_inv["samples_per_s"], "var_per_sample_invrender": s_inv["var_per_sample"],
-           "cpu_per_wall_invrender": s_inv["cpu_per_wall"], "features": asdict(features),
-           "ref_spp": {name: c["spp"] for name, c in converged.items()}, "target_spp": settings.target_spp,
-           "target_render_s": target_s,
-           # How large L - target is against L: a difference d in L is d / this in the L2 gradient.
-           "residual_rel": float(np.mean(np.abs(forward_image - target)) / np.mean(forward_image))}
-    profile = [{"section": "profile", "bounces": bounces, "renderer": name, "spp": s["top"]["spp"],
-                "pass_s": s["top"]["wall_s"], "forward_s": s["top"]["forward_s"], "backward_s": s["top"]["backward_s"],
-                "backward_over_forward": s["top"]["backward_s"] / s["top"]["forward_s"],
-                "adjoint_runs": s["top"].get("adjoint_runs"),
-                "samples_per_s": s["samples_per_s"], "cpu_per_wall": s["cpu_per_wall"],
-                "var_per_sample": s["var_per_sample"], "backward_var_per_sample": s["backward_var_per_sample"],
-                "backward_var_share": s["backward_var_per_sample"] / s["var_per_sample"]}
-               for name, s in summary.items()]
+    row = {
+        "section": "equal_error",
+        "bounces": bounces,
+        "mitsuba_variant": variant,
+        "width": camera.width,
+        "height": camera.height,
+        "ref_rms": ref_rms,
+        "ref_noise_rel_rmse": math.sqrt(ref_noise) / ref_rms,
+        "samples_per_s_invrender": s_inv["samples_per_s"],
+        "var_per_sample_invrender": s_inv["var_per_sample"],
+        "cpu_per_wall_invrender": s_inv["cpu_per_wall"],
+        "features": asdict(features),
+        "ref_spp": {name: c["spp"] for name, c in converged.items()},
+        "target_spp": settings.target_spp,
+        "target_render_s": target_s,
+        # How large L - target is against L: a difference d in L is d / this in the L2 gradient.
+        "residual_rel": float(np.mean(np.abs(forward_image - target)) / np.mean(forward_image)),
+    }
+    profile = [
+        {
+            "section": "profile",
+            "bounces": bounces,
+            "renderer": name,
+            "spp": s["top"]["spp"],
+            "pass_s": s["top"]["wall_s"],
+            "forward_s": s["top"]["forward_s"],
+            "backward_s": s["top"]["backward_s"],
+            "backward_over_forward": s["top"]["backward_s"] / s["top"]["forward_s"],
+            "adjoint_runs": s["top"].get("adjoint_runs"),
+            "samples_per_s": s["samples_per_s"],
+            "cpu_per_wall": s["cpu_per_wall"],
+            "var_per_sample": s["var_per_sample"],
+            "backward_var_per_sample": s["backward_var_per_sample"],
+            "backward_var_share": s["backward_var_per_sample"] / s["var_per_sample"],
+        }
+        for name, s in summary.items()
+    ]
     if "mitsuba" in summary:
         s_mit = summary["mitsuba"]
         target_rmse = max(s["rmses"][-1] for s in summary.values())
@@ -442,42 +523,72 @@ def equal_error(true, start, covered, camera, bounces: int, settings: Settings, 
         cpu_mit, _ = time_at_rmse(s_mit["cpu_times"], s_mit["rmses"], target_rmse)
         model = {name: fit_model(settings.ladder, summary[name]["times"], summary[name]["rmses"]) for name in summary}
         check = reference_agreement(converged)
-        row.update({
-            "target_rmse": target_rmse, "target_rel_rmse": target_rmse / ref_rms,
-            "t_invrender_s": t_inv, "t_mitsuba_s": t_mit, "ratio": t_mit / t_inv,
-            "ratio_fit": model_time(model["mitsuba"], target_rmse) / model_time(model["invrender"], target_rmse),
-            "ratio_cpu": cpu_mit / cpu_inv, "extrapolated": bool(extra_inv or extra_mit),
-            "fit_invrender": model["invrender"], "fit_mitsuba": model["mitsuba"],
-            "samples_per_s_mitsuba": s_mit["samples_per_s"], "speed_ratio": s_inv["samples_per_s"] / s_mit["samples_per_s"],
-            "var_per_sample_mitsuba": s_mit["var_per_sample"],
-            "variance_ratio": s_mit["var_per_sample"] / s_inv["var_per_sample"],
-            "cpu_per_wall_mitsuba": s_mit["cpu_per_wall"], **check,
-            "agreement": verdict(check, min(c["spp"] for c in converged.values())),
-        })
+        row.update(
+            {
+                "target_rmse": target_rmse,
+                "target_rel_rmse": target_rmse / ref_rms,
+                "t_invrender_s": t_inv,
+                "t_mitsuba_s": t_mit,
+                "ratio": t_mit / t_inv,
+                "ratio_fit": model_time(model["mitsuba"], target_rmse) / model_time(model["invrender"], target_rmse),
+                "ratio_cpu": cpu_mit / cpu_inv,
+                "extrapolated": bool(extra_inv or extra_mit),
+                "fit_invrender": model["invrender"],
+                "fit_mitsuba": model["mitsuba"],
+                "samples_per_s_mitsuba": s_mit["samples_per_s"],
+                "speed_ratio": s_inv["samples_per_s"] / s_mit["samples_per_s"],
+                "var_per_sample_mitsuba": s_mit["var_per_sample"],
+                "variance_ratio": s_mit["var_per_sample"] / s_inv["var_per_sample"],
+                "cpu_per_wall_mitsuba": s_mit["cpu_per_wall"],
+                **check,
+                "agreement": verdict(check, min(c["spp"] for c in converged.values())),
+            }
+        )
         for p in profile:
             other = [q for q in profile if q is not p][0]
             p["pass_vs_other"] = p["pass_s"] / other["pass_s"]
             p["var_vs_other"] = p["var_per_sample"] / other["var_per_sample"]
             p["backward_var_vs_other"] = p["backward_var_per_sample"] / max(other["backward_var_per_sample"], 1e-300)
 
-    one_steady = {r.name: median([x["wall"] for x in records if x["renderer"] == r.name and x["spp"] == settings.ladder[0]])
-                  for r in runners}
-    one_time = [{"section": "one_time", "bounces": bounces, "renderer": "invrender",
-                 "scene_s": inv.one_time["pack_s"], "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
-                 "setup_s": inv.one_time["init_s"], "setup_what": "upload + render kernel build",
-                 "first_pass_s": inv.one_time["first_pass_s"], "first_what": "+ adjoint kernel build",
-                 "steady_pass_s": one_steady["invrender"], "maps_step_s": median(
-                     [clock(inv.new_maps, start.maps)[1] for _ in range(3)]), "maps_what": "Renderer.set_maps"}]
+    one_steady = {
+        r.name: median([x["wall"] for x in records if x["renderer"] == r.name and x["spp"] == settings.ladder[0]])
+        for r in runners
+    }
+    one_time = [
+        {
+            "section": "one_time",
+            "bounces": bounces,
+            "renderer": "invrender",
+            "scene_s": inv.one_time["pack_s"],
+            "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
+            "setup_s": inv.one_time["init_s"],
+            "setup_what": "upload + render kernel build",
+            "first_pass_s": inv.one_time["first_pass_s"],
+            "first_what": "+ adjoint kernel build",
+            "steady_pass_s": one_steady["invrender"],
+            "maps_step_s": median([clock(inv.new_maps, start.maps)[1] for _ in range(3)]),
+            "maps_what": "Renderer.set_maps",
+        }
+    ]
     if len(runners) > 1:
         mit = runners[1]
-        one_time.append({"section": "one_time", "bounces": bounces, "renderer": f"mitsuba {variant} prb",
-                         "scene_s": mit.one_time["convert_s"], "scene_what": "scene_to_mitsuba_diffuse (our bridge)",
-                         "setup_s": mit.one_time["load_s"], "setup_what": "mi.load_dict (plugins, BVH)",
-                         "first_pass_s": mit.one_time["first_pass_s"],
-                         "first_what": "JIT; first pass at each spp: " + ", ".join(f"{k}: {v:.2f}" for k, v in sorted(mit.warmed.items())),
-                         "steady_pass_s": one_steady["mitsuba"],
-                         "maps_step_s": median([clock(mit.new_maps, start.maps)[1] for _ in range(3)]),
-                         "maps_what": "params[kd] = ...; params.update()"})
+        one_time.append(
+            {
+                "section": "one_time",
+                "bounces": bounces,
+                "renderer": f"mitsuba {variant} prb",
+                "scene_s": mit.one_time["convert_s"],
+                "scene_what": "scene_to_mitsuba_diffuse (our bridge)",
+                "setup_s": mit.one_time["load_s"],
+                "setup_what": "mi.load_dict (plugins, BVH)",
+                "first_pass_s": mit.one_time["first_pass_s"],
+                "first_what": "JIT; first pass at each spp: "
+                + ", ".join(f"{k}: {v:.2f}" for k, v in sorted(mit.warmed.items())),
+                "steady_pass_s": one_steady["mitsuba"],
+                "maps_step_s": median([clock(mit.new_maps, start.maps)[1] for _ in range(3)]),
+                "maps_what": "params[kd] = ...; params.update()",
+            }
+        )
     return row, curves, one_time, profile
 
 
@@ -520,13 +631,22 @@ def memory_probe(renderer: str, side: int, bounces: int, accumulation: str, vari
     before_second = _rss_mb()
     with PeakRSS() as second:
         _, second_s, second_cpu = clock(run)
-    return {"section": "memory", "renderer": renderer if renderer == "invrender" else f"mitsuba {variant} prb",
-            "accumulation": accumulation if renderer == "invrender" else "-", "rays": side * side,
-            "bounces": bounces, "rss_after_setup_mb": setup_mb, "first_pass_growth_mb": first.growth / 2**20,
-            "rss_before_second_mb": before_second, "pass_growth_mb": second.growth / 2**20,
-            # Polled, not ru_maxrss: in these children it read the parent's high-water mark.
-            "peak_rss_mb": max(setup_mb, first.peak / 2**20, second.peak / 2**20),
-            "first_pass_s": first_s, "pass_s": second_s, "pass_cpu_s": second_cpu}
+    return {
+        "section": "memory",
+        "renderer": renderer if renderer == "invrender" else f"mitsuba {variant} prb",
+        "accumulation": accumulation if renderer == "invrender" else "-",
+        "rays": side * side,
+        "bounces": bounces,
+        "rss_after_setup_mb": setup_mb,
+        "first_pass_growth_mb": first.growth / 2**20,
+        "rss_before_second_mb": before_second,
+        "pass_growth_mb": second.growth / 2**20,
+        # Polled, not ru_maxrss: in these children it read the parent's high-water mark.
+        "peak_rss_mb": max(setup_mb, first.peak / 2**20, second.peak / 2**20),
+        "first_pass_s": first_s,
+        "pass_s": second_s,
+        "pass_cpu_s": second_cpu,
+    }
 
 
 def memory_section(settings: Settings, variant: str, accumulations, device=None) -> list[dict]:
@@ -535,17 +655,31 @@ def memory_section(settings: Settings, variant: str, accumulations, device=None)
         cases.append(("mitsuba", "-"))
     rows = []
     for renderer, accumulation in tqdm(cases, desc="memory", unit="probe", leave=False):
-        command = [sys.executable, "-m", "invrender.bench.gradients", "memory-probe", "--renderer", renderer,
-                   "--side", str(settings.memory_side), "--bounces", str(settings.memory_bounces),
-                   "--accumulation", accumulation, "--variant", variant]
+        command = [
+            sys.executable,
+            "-m",
+            "invrender.bench.gradients",
+            "memory-probe",
+            "--renderer",
+            renderer,
+            "--side",
+            str(settings.memory_side),
+            "--bounces",
+            str(settings.memory_bounces),
+            "--accumulation",
+            accumulation,
+            "--variant",
+            variant,
+        ]
         if device:
             command += ["--device", device]
         proc = subprocess.run(command, capture_output=True, text=True, env={**os.environ, **PROBE_ENV})
         lines = [line for line in proc.stdout.splitlines() if line.startswith(PROBE_MARK)]
         if proc.returncode != 0 or not lines:
-            raise RuntimeError(f"memory probe ({renderer}, {accumulation}) failed with code {proc.returncode}:\n"
-                               f"{proc.stderr[-4000:]}")
-        rows.append(json.loads(lines[-1][len(PROBE_MARK):]))
+            raise RuntimeError(
+                f"memory probe ({renderer}, {accumulation}) failed with code {proc.returncode}:\n{proc.stderr[-4000:]}"
+            )
+        rows.append(json.loads(lines[-1][len(PROBE_MARK) :]))
     return rows
 
 
@@ -570,7 +704,7 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
         diffs = []
         for rep in tqdm(range(settings.accumulation_repeats), desc=f"accumulation B={bounces}", leave=False):
             pair = {}
-            for mode in (("fixed", "buckets") if rep % 2 == 0 else ("buckets", "fixed")):
+            for mode in ("fixed", "buckets") if rep % 2 == 0 else ("buckets", "fixed"):
                 seed = runner._seed
                 grad, wall, _ = clock(runner.gradient, settings.accumulation_spp, mode)
                 runner._seed = seed  # both modes trace the same samples: their sums differ by rounding only
@@ -582,16 +716,27 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
             scale = float(np.abs(pair["fixed"]).max())
             diffs.append(float(np.abs(pair["buckets"] - pair["fixed"]).max()) / max(scale, 1e-300))
         med = {mode: (median([t[0] for t in v]), median([t[1] for t in v])) for mode, v in times.items()}
-        rows.append({"section": "accumulation", "bounces": bounces, "rays": camera.width * camera.height,
-                     "spp": settings.accumulation_spp, "repeats": settings.accumulation_repeats,
-                     "backward_fixed_s": med["fixed"][1], "backward_buckets_s": med["buckets"][1],
-                     "backward_ratio": med["fixed"][1] / med["buckets"][1],
-                     "pass_fixed_s": med["fixed"][0], "pass_buckets_s": med["buckets"][0],
-                     "pass_ratio": med["fixed"][0] / med["buckets"][0], "max_rel_diff": max(diffs),
-                     "adjoint_runs_fixed": _mean_or_none(runs["fixed"]),
-                     # One run of each, the fixed one at the scales its first run chose: what the
-                     # accumulation itself costs, without the fixed mode's scale-finding run.
-                     "run_fixed_s": _median_or_none(last_run["fixed"]), "run_buckets_s": _median_or_none(last_run["buckets"])})
+        rows.append(
+            {
+                "section": "accumulation",
+                "bounces": bounces,
+                "rays": camera.width * camera.height,
+                "spp": settings.accumulation_spp,
+                "repeats": settings.accumulation_repeats,
+                "backward_fixed_s": med["fixed"][1],
+                "backward_buckets_s": med["buckets"][1],
+                "backward_ratio": med["fixed"][1] / med["buckets"][1],
+                "pass_fixed_s": med["fixed"][0],
+                "pass_buckets_s": med["buckets"][0],
+                "pass_ratio": med["fixed"][0] / med["buckets"][0],
+                "max_rel_diff": max(diffs),
+                "adjoint_runs_fixed": _mean_or_none(runs["fixed"]),
+                # One run of each, the fixed one at the scales its first run chose: what the
+                # accumulation itself costs, without the fixed mode's scale-finding run.
+                "run_fixed_s": _median_or_none(last_run["fixed"]),
+                "run_buckets_s": _median_or_none(last_run["buckets"]),
+            }
+        )
         row = rows[-1]
         if row["run_fixed_s"] and row["run_buckets_s"]:
             row["run_ratio"] = row["run_fixed_s"] / row["run_buckets_s"]
@@ -603,46 +748,117 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
 # ---------------------------------------------------------------------------------------------
 
 TABLES = {
-    "equal_error": ("Time to equal gradient error (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender faster)", [
-        ("bounces", "B", "d"), ("width", "W", "d"), ("height", "H", "d"), ("target_rel_rmse", "target rel. error", ".3f"),
-        ("t_invrender_s", "t inv [s]", ".3g"), ("t_mitsuba_s", "t mi [s]", ".3g"), ("ratio", "ratio", ".3f"),
-        ("ratio_fit", "ratio (fit)", ".3f"), ("ratio_cpu", "ratio (CPU time)", ".3f"),
-        ("speed_ratio", "samples/s inv/mi", ".3f"), ("variance_ratio", "var/sample mi/inv", ".3f"),
-        ("ref_noise_rel_rmse", "ref noise (rel.)", ".3f"), ("mean_rel_diff", "d/dkd along kd: rel diff", "+.2%"),
-        ("mean_rel_sigma", "(1 sigma)", ".2%"), ("agreement", "gradients", "s"),
-        ("texel_mse_over_noise", "texel MSE / noise", ".2f"), ("image_rel_diff", "forward images: rel diff", "+.2%"),
-        ("image_rel_sigma", "(1 sigma) ", ".2%")]),
-    "one_time": ("One-time costs, excluded from the pass times above [s]", [
-        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("scene_s", "scene", ".3f"), ("scene_what", "= what", "s"),
-        ("setup_s", "setup", ".3f"), ("setup_what", "= what", "s"), ("first_pass_s", "first pass (1 spp)", ".3f"),
-        ("first_what", "= what", "s"), ("steady_pass_s", "later 1-spp pass", ".4f"),
-        ("maps_step_s", "new maps (a step)", ".4f"), ("maps_what", "= what", "s")]),
-    "curves": ("Gradient error against time (the ladders; error with the reference's noise removed, relative to the reference's RMS)", [
-        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("spp", "spp", "d"), ("wall_s", "pass [s]", ".4f"),
-        ("wall_min_s", "min", ".4f"), ("wall_max_s", "max", ".4f"), ("cpu_s", "cpu [s]", ".4f"),
-        ("forward_s", "forward [s]", ".4f"), ("backward_s", "backward [s]", ".4f"), ("adjoint_runs", "adjoint runs", ".1f"),
-        ("rel_rmse", "rel. error", ".4g")]),
-    "profile": ("A pass at the top rung: forward and backward halves (median of repeats)", [
-        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("spp", "spp", "d"), ("pass_s", "pass [s]", ".3f"),
-        ("forward_s", "forward [s]", ".3f"), ("backward_s", "backward [s]", ".3f"),
-        ("backward_over_forward", "backward / forward", ".2f"), ("adjoint_runs", "adjoint runs", ".2f"),
-        ("pass_vs_other", "pass / other's pass", ".2f"), ("samples_per_s", "samples/s", ".3g"),
-        ("cpu_per_wall", "CPU / wall", ".2f"), ("var_per_sample", "var/sample", ".3g"),
-        ("var_vs_other", "var / other's", ".2f"), ("backward_var_share", "of it: backward alone", ".0%"),
-        ("backward_var_vs_other", "backward var / other's", ".2f")]),
-    "memory": ("Peak memory of one gradient pass (1 spp), each renderer in its own process [MB]", [
-        ("renderer", "renderer", "s"), ("accumulation", "accumulation", "s"), ("rays", "rays", "d"), ("bounces", "B", "d"),
-        ("rss_after_setup_mb", "RSS after setup", ".0f"), ("first_pass_growth_mb", "growth, first pass", ".1f"),
-        ("pass_growth_mb", "growth, second pass", ".1f"), ("peak_rss_mb", "process peak RSS", ".0f"),
-        ("first_pass_s", "first pass [s]", ".3f"), ("pass_s", "second pass [s]", ".3f")]),
-    "accumulation": ("What determinism costs: fixed-point against bucketed float accumulation (median of interleaved passes)", [
-        ("bounces", "B", "d"), ("rays", "rays", "d"), ("spp", "spp", "d"), ("backward_fixed_s", "backward fixed [s]", ".4f"),
-        ("backward_buckets_s", "backward buckets [s]", ".4f"), ("backward_ratio", "fixed / buckets", ".3f"),
-        ("pass_fixed_s", "pass fixed [s]", ".4f"), ("pass_buckets_s", "pass buckets [s]", ".4f"),
-        ("pass_ratio", "pass fixed / buckets", ".3f"), ("adjoint_runs_fixed", "adjoint runs (fixed)", ".2f"),
-        ("run_fixed_s", "one run fixed [s]", ".4f"), ("run_buckets_s", "one run buckets [s]", ".4f"),
-        ("run_ratio", "one run fixed / buckets", ".3f"),
-        ("max_rel_diff", "max |diff| / max |grad|", ".1e")]),
+    "equal_error": (
+        "Time to equal gradient error (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, "
+        "> 1: invrender faster)",
+        [
+            ("bounces", "B", "d"),
+            ("width", "W", "d"),
+            ("height", "H", "d"),
+            ("target_rel_rmse", "target rel. error", ".3f"),
+            ("t_invrender_s", "t inv [s]", ".3g"),
+            ("t_mitsuba_s", "t mi [s]", ".3g"),
+            ("ratio", "ratio", ".3f"),
+            ("ratio_fit", "ratio (fit)", ".3f"),
+            ("ratio_cpu", "ratio (CPU time)", ".3f"),
+            ("speed_ratio", "samples/s inv/mi", ".3f"),
+            ("variance_ratio", "var/sample mi/inv", ".3f"),
+            ("ref_noise_rel_rmse", "ref noise (rel.)", ".3f"),
+            ("mean_rel_diff", "d/dkd along kd: rel diff", "+.2%"),
+            ("mean_rel_sigma", "(1 sigma)", ".2%"),
+            ("agreement", "gradients", "s"),
+            ("texel_mse_over_noise", "texel MSE / noise", ".2f"),
+            ("image_rel_diff", "forward images: rel diff", "+.2%"),
+            ("image_rel_sigma", "(1 sigma) ", ".2%"),
+        ],
+    ),
+    "one_time": (
+        "One-time costs, excluded from the pass times above [s]",
+        [
+            ("bounces", "B", "d"),
+            ("renderer", "renderer", "s"),
+            ("scene_s", "scene", ".3f"),
+            ("scene_what", "= what", "s"),
+            ("setup_s", "setup", ".3f"),
+            ("setup_what", "= what", "s"),
+            ("first_pass_s", "first pass (1 spp)", ".3f"),
+            ("first_what", "= what", "s"),
+            ("steady_pass_s", "later 1-spp pass", ".4f"),
+            ("maps_step_s", "new maps (a step)", ".4f"),
+            ("maps_what", "= what", "s"),
+        ],
+    ),
+    "curves": (
+        "Gradient error against time (the ladders; error with the reference's noise removed, "
+        "relative to the reference's RMS)",
+        [
+            ("bounces", "B", "d"),
+            ("renderer", "renderer", "s"),
+            ("spp", "spp", "d"),
+            ("wall_s", "pass [s]", ".4f"),
+            ("wall_min_s", "min", ".4f"),
+            ("wall_max_s", "max", ".4f"),
+            ("cpu_s", "cpu [s]", ".4f"),
+            ("forward_s", "forward [s]", ".4f"),
+            ("backward_s", "backward [s]", ".4f"),
+            ("adjoint_runs", "adjoint runs", ".1f"),
+            ("rel_rmse", "rel. error", ".4g"),
+        ],
+    ),
+    "profile": (
+        "A pass at the top rung: forward and backward halves (median of repeats)",
+        [
+            ("bounces", "B", "d"),
+            ("renderer", "renderer", "s"),
+            ("spp", "spp", "d"),
+            ("pass_s", "pass [s]", ".3f"),
+            ("forward_s", "forward [s]", ".3f"),
+            ("backward_s", "backward [s]", ".3f"),
+            ("backward_over_forward", "backward / forward", ".2f"),
+            ("adjoint_runs", "adjoint runs", ".2f"),
+            ("pass_vs_other", "pass / other's pass", ".2f"),
+            ("samples_per_s", "samples/s", ".3g"),
+            ("cpu_per_wall", "CPU / wall", ".2f"),
+            ("var_per_sample", "var/sample", ".3g"),
+            ("var_vs_other", "var / other's", ".2f"),
+            ("backward_var_share", "of it: backward alone", ".0%"),
+            ("backward_var_vs_other", "backward var / other's", ".2f"),
+        ],
+    ),
+    "memory": (
+        "Peak memory of one gradient pass (1 spp), each renderer in its own process [MB]",
+        [
+            ("renderer", "renderer", "s"),
+            ("accumulation", "accumulation", "s"),
+            ("rays", "rays", "d"),
+            ("bounces", "B", "d"),
+            ("rss_after_setup_mb", "RSS after setup", ".0f"),
+            ("first_pass_growth_mb", "growth, first pass", ".1f"),
+            ("pass_growth_mb", "growth, second pass", ".1f"),
+            ("peak_rss_mb", "process peak RSS", ".0f"),
+            ("first_pass_s", "first pass [s]", ".3f"),
+            ("pass_s", "second pass [s]", ".3f"),
+        ],
+    ),
+    "accumulation": (
+        "What determinism costs: fixed-point against bucketed float accumulation (median of interleaved passes)",
+        [
+            ("bounces", "B", "d"),
+            ("rays", "rays", "d"),
+            ("spp", "spp", "d"),
+            ("backward_fixed_s", "backward fixed [s]", ".4f"),
+            ("backward_buckets_s", "backward buckets [s]", ".4f"),
+            ("backward_ratio", "fixed / buckets", ".3f"),
+            ("pass_fixed_s", "pass fixed [s]", ".4f"),
+            ("pass_buckets_s", "pass buckets [s]", ".4f"),
+            ("pass_ratio", "pass fixed / buckets", ".3f"),
+            ("adjoint_runs_fixed", "adjoint runs (fixed)", ".2f"),
+            ("run_fixed_s", "one run fixed [s]", ".4f"),
+            ("run_buckets_s", "one run buckets [s]", ".4f"),
+            ("run_ratio", "one run fixed / buckets", ".3f"),
+            ("max_rel_diff", "max |diff| / max |grad|", ".1e"),
+        ],
+    ),
 }
 SECTIONS = ("equal_error", "one_time", "curves", "profile", "memory", "accumulation")
 
@@ -657,8 +873,10 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     if why:
         notes.append(why)
     if not is_ad_variant(variant):
-        notes.append(f"Mitsuba {variant} has no automatic differentiation (prb needs an *_ad_* variant): "
-                     "invrender's gradient passes are measured alone, without a peer")
+        notes.append(
+            f"Mitsuba {variant} has no automatic differentiation (prb needs an *_ad_* variant): "
+            "invrender's gradient passes are measured alone, without a peer"
+        )
         log.warning("%s", notes[-1])
     accumulations = ("fixed", "buckets") if has_accumulation() else ("fixed",)
     if len(accumulations) == 1:
@@ -677,9 +895,11 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         results["one_time"] += one_time
         results["profile"] += profile
         if row.get("agreement") not in (None, "agree", "not checked"):
-            notes.append(f"B={bounces}: the converged gradients of invrender and Mitsuba differ along kd by "
-                         f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
-                         + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run"))
+            notes.append(
+                f"B={bounces}: the converged gradients of invrender and Mitsuba differ along kd by "
+                f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
+                + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run")
+            )
     log.info("memory of a %d-ray, %d-bounce pass ...", settings.memory_side**2, settings.memory_bounces)
     results["memory"] = memory_section(settings, variant, accumulations, device)
     if len(accumulations) > 1:
@@ -687,21 +907,36 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         results["accumulation"] = accumulation_section(start, camera, settings, device)
 
     if len(results["curves"]) and is_ad_variant(variant):
-        note = plot(results["curves"], results["equal_error"], out / "gradients_error_vs_time.png",
-                    xlabel="wall time per gradient pass [s]", ylabel="gradient RMSE vs reference",
-                    curves_csv="gradients_curves.csv")
+        note = plot(
+            results["curves"],
+            results["equal_error"],
+            out / "gradients_error_vs_time.png",
+            xlabel="wall time per gradient pass [s]",
+            ylabel="gradient RMSE vs reference",
+            curves_csv="gradients_curves.csv",
+        )
         if note:
             notes.append(note)
     machine = machine_info(device)
     machine["load_average_start"] = load_start
     machine["load_average_end"] = os.getloadavg()
-    report = {"benchmark": "gradients", "mode": settings.mode, "mitsuba_variant": variant,
-              "accumulations": list(accumulations), "settings": asdict(settings), "machine": machine,
-              "seconds": time.time() - started, "notes": notes, **results}
+    report = {
+        "benchmark": "gradients",
+        "mode": settings.mode,
+        "mitsuba_variant": variant,
+        "accumulations": list(accumulations),
+        "settings": asdict(settings),
+        "machine": machine,
+        "seconds": time.time() - started,
+        "notes": notes,
+        **results,
+    }
 
-    title = (f"# invrender bench gradients ({settings.mode}; Mitsuba {variant} prb; {camera.width}x{camera.height}, "
-             f"room view {settings.view}, d loss / d kd of a {covered.shape[1]}x{covered.shape[0]} atlas; "
-             f"{report['seconds']:.0f} s)")
+    title = (
+        f"# invrender bench gradients ({settings.mode}; Mitsuba {variant} prb; {camera.width}x{camera.height}, "
+        f"room view {settings.view}, d loss / d kd of a {covered.shape[1]}x{covered.shape[0]} atlas; "
+        f"{report['seconds']:.0f} s)"
+    )
     write_report(out, "gradients", title, report, TABLES, SECTIONS)
     return report
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 import os
 import platform
@@ -16,7 +17,6 @@ import subprocess
 import sys
 import threading
 import time
-import logging
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -130,7 +130,8 @@ def choose_variant() -> tuple[str, str | None]:
     return "scalar_rgb", (
         "Mitsuba's llvm_ad_rgb variant is unavailable (no libLLVM >= 16 found; Debian: apt-get install "
         "libllvm19, or set DRJIT_LIBLLVM_PATH). Comparing against scalar_rgb instead, a much weaker peer "
-        "(one lane, the Python milo BSDF called per sample), at a reduced image size and ladder.")
+        "(one lane, the Python milo BSDF called per sample), at a reduced image size and ladder."
+    )
 
 
 class RunStart(NamedTuple):
@@ -202,7 +203,7 @@ def model_time(model: dict, target: float) -> float:
 
 
 def verdict(check: dict, spp: int, tolerance: float = 0.01) -> str:
-    """"agree" (|mean rel diff| <= tolerance), "DIFFER" (beyond it by more than 3 sigma of the
+    """ "agree" (|mean rel diff| <= tolerance), "DIFFER" (beyond it by more than 3 sigma of the
     noise: a bug to report, not noise) or "unresolved" (beyond it, but within the noise);
     "not checked" below MIN_SPP_TO_JUDGE samples per pixel, where the sun's rare bright paths
     are missing from the sample and its noise estimate is not to be trusted (quick runs)."""
@@ -251,8 +252,14 @@ def write_csv(path: Path, rows: list[dict]):
             writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
 
 
-def plot(curves: list[dict], equal: list[dict], path: Path, xlabel: str = "wall time per image [s]",
-         ylabel: str = "RMSE vs reference", curves_csv: str = "render_curves.csv") -> str | None:
+def plot(
+    curves: list[dict],
+    equal: list[dict],
+    path: Path,
+    xlabel: str = "wall time per image [s]",
+    ylabel: str = "RMSE vs reference",
+    curves_csv: str = "render_curves.csv",
+) -> str | None:
     """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped.
     Rows: curves with bounces, renderer, wall_s, rmse; equal with bounces, target_rmse."""
     try:
@@ -307,8 +314,9 @@ def machine_info(device=None) -> dict:
     info["numpy"] = np.__version__
     try:
         root = Path(__file__).resolve().parents[3]
-        info["git_commit"] = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-                                            capture_output=True, text=True).stdout.strip()
+        info["git_commit"] = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
     except OSError:
         pass
     return info

@@ -51,8 +51,22 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from tqdm import tqdm
 
-from .harness import (start_run, PeakRSS, clock, fit_model, machine_info, median, model_time,
-                      next_seed_block, plot, quiet_pyopencl, room_scene, time_at_rmse, verdict, write_report)
+from .harness import (
+    PeakRSS,
+    clock,
+    fit_model,
+    machine_info,
+    median,
+    model_time,
+    next_seed_block,
+    plot,
+    quiet_pyopencl,
+    room_scene,
+    start_run,
+    time_at_rmse,
+    verdict,
+    write_report,
+)
 
 log = logging.getLogger("invrender.bench")
 
@@ -84,18 +98,37 @@ class Settings:
 
 
 FULL = Settings("full", repeats=7, throughput_spp=64, feature_spp=128, feature_repeats=8)
-QUICK = Settings("quick", width=32, height=24, ladder=(1, 2, 4, 8), repeats=3, ref_spp_invrender=256,
-                 ref_spp_mitsuba=256, bvh_triangles=(20_000,), bvh_repeats=1, throughput_spp=2,
-                 throughput_repeats=2, feature_spp=8, feature_repeats=2, profile_spp=8, profile_repeats=2)
+QUICK = Settings(
+    "quick",
+    width=32,
+    height=24,
+    ladder=(1, 2, 4, 8),
+    repeats=3,
+    ref_spp_invrender=256,
+    ref_spp_mitsuba=256,
+    bvh_triangles=(20_000,),
+    bvh_repeats=1,
+    throughput_spp=2,
+    throughput_repeats=2,
+    feature_spp=8,
+    feature_repeats=2,
+    profile_spp=8,
+    profile_repeats=2,
+)
 
 
 def scalar_settings(settings: Settings) -> Settings:
     """Mitsuba's scalar_rgb calls the Python BSDF plugin per sample (~70x slower than llvm):
     a smaller image, a shorter ladder and a smaller Mitsuba reference."""
     quick = settings.mode == "quick"
-    return replace(settings, width=16 if quick else 32, height=12 if quick else 24,
-                   ladder=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
-                   ref_spp_mitsuba=32 if quick else 512, bvh_mitsuba=False)
+    return replace(
+        settings,
+        width=16 if quick else 32,
+        height=12 if quick else 24,
+        ladder=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
+        ref_spp_mitsuba=32 if quick else 512,
+        bvh_mitsuba=False,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -215,7 +248,9 @@ class MitsubaRunner:
         self.mi, self.camera, self.one_time = mi, camera, {}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            scene_dict, self.one_time["convert_s"], _ = clock(bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant)
+            scene_dict, self.one_time["convert_s"], _ = clock(
+                bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant
+            )
         self.bridge_warnings = sorted({str(w.message) for w in caught})
         self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
         self.per_pass = max(1, LAUNCH_SAMPLES // (camera.width * camera.height))
@@ -252,17 +287,23 @@ def reference(runners, spps, progress_desc):
         halves.setdefault(runner.name, []).append((image.astype(np.float64), wall, max(1, spp)))
     for name, ((a, wa, n), (b, wb, _)) in halves.items():
         noise = float(np.mean((a - b) ** 2) / 4.0)  # MSE of (a + b) / 2 from its own noise
-        converged[name] = {"image": (a + b) / 2, "noise_mse": max(noise, 1e-30), "spp": 2 * n,
-                           "mean_var": float((a.mean() - b.mean()) ** 2 / 4.0),
-                           "seconds": wa + wb, "samples_per_s": 2 * n * a.shape[0] * a.shape[1] / (wa + wb)}
+        converged[name] = {
+            "image": (a + b) / 2,
+            "noise_mse": max(noise, 1e-30),
+            "spp": 2 * n,
+            "mean_var": float((a.mean() - b.mean()) ** 2 / 4.0),
+            "seconds": wa + wb,
+            "samples_per_s": 2 * n * a.shape[0] * a.shape[1] / (wa + wb),
+        }
     weights = {name: 1.0 / c["noise_mse"] for name, c in converged.items()}
     total = sum(weights.values())
     ref = sum(weights[name] * c["image"] for name, c in converged.items()) / total
     return ref, 1.0 / total, converged
 
 
-def agreement(a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var_a: float = 0.0,
-              mean_var_b: float = 0.0) -> dict:
+def agreement(
+    a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var_a: float = 0.0, mean_var_b: float = 0.0
+) -> dict:
     """How two estimates of one image differ: relative difference of the image means with its
     1-sigma noise, per channel, and the per-pixel RMS difference beyond what the noise explains.
 
@@ -276,9 +317,13 @@ def agreement(a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var
     sigma = math.sqrt(max((var_a + var_b) / n, mean_var_a + mean_var_b)) / mean_b
     per_channel = ((a.mean((0, 1)) - b.mean((0, 1))) / b.mean((0, 1))).tolist()
     mse = float(np.mean((a - b) ** 2))
-    return {"mean_rel_diff": rel, "mean_rel_sigma": sigma, "channel_rel_diff": per_channel,
-            "pixel_mse_over_noise": mse / max(var_a + var_b, 1e-30),
-            "pixel_excess_rmse": math.sqrt(max(0.0, mse - var_a - var_b))}
+    return {
+        "mean_rel_diff": rel,
+        "mean_rel_sigma": sigma,
+        "channel_rel_diff": per_channel,
+        "pixel_mse_over_noise": mse / max(var_a + var_b, 1e-30),
+        "pixel_excess_rmse": math.sqrt(max(0.0, mse - var_a - var_b)),
+    }
 
 
 def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
@@ -291,11 +336,17 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     mit.warm_up()
     runners = (inv, mit)
 
-    ref, ref_noise, converged = reference(runners, (settings.ref_spp_invrender, settings.ref_spp_mitsuba),
-                                          f"reference B={bounces}")
-    check = agreement(converged["invrender"]["image"], converged["mitsuba"]["image"],
-                      converged["invrender"]["noise_mse"], converged["mitsuba"]["noise_mse"],
-                      converged["invrender"]["mean_var"], converged["mitsuba"]["mean_var"])
+    ref, ref_noise, converged = reference(
+        runners, (settings.ref_spp_invrender, settings.ref_spp_mitsuba), f"reference B={bounces}"
+    )
+    check = agreement(
+        converged["invrender"]["image"],
+        converged["mitsuba"]["image"],
+        converged["invrender"]["noise_mse"],
+        converged["mitsuba"]["noise_mse"],
+        converged["invrender"]["mean_var"],
+        converged["mitsuba"]["mean_var"],
+    )
 
     # Steady-state 1-spp time, to tell the first render's one-time part from its work.
     records = []
@@ -304,7 +355,7 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     # repeats of one rung (the medians absorb the former).
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="render", leave=False):
-        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+        for runner in runners if rep % 2 == 0 else runners[::-1]:
             image, wall, cpu = clock(runner.render, spp)
             mse = float(np.mean((image.astype(np.float64) - ref) ** 2))
             records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse})
@@ -318,14 +369,26 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
             walls = [r["wall"] for r in mine]
             mse_raw = float(np.mean([r["mse"] for r in mine]))
             mse = max(mse_raw - ref_noise, 1e-3 * mse_raw)  # the reference's own noise removed
-            rows.append({"section": "curves", "bounces": bounces, "renderer": runner.name, "spp": spp,
-                         "wall_s": median(walls), "wall_min_s": min(walls), "wall_max_s": max(walls),
-                         "cpu_s": median([r["cpu"] for r in mine]), "rmse": math.sqrt(mse),
-                         "rmse_raw": math.sqrt(mse_raw), "repeats": len(mine)})
+            rows.append(
+                {
+                    "section": "curves",
+                    "bounces": bounces,
+                    "renderer": runner.name,
+                    "spp": spp,
+                    "wall_s": median(walls),
+                    "wall_min_s": min(walls),
+                    "wall_max_s": max(walls),
+                    "cpu_s": median([r["cpu"] for r in mine]),
+                    "rmse": math.sqrt(mse),
+                    "rmse_raw": math.sqrt(mse_raw),
+                    "repeats": len(mine),
+                }
+            )
         curves += rows
         top = rows[-1]
         summary[runner.name] = {
-            "times": [r["wall_s"] for r in rows], "rmses": [r["rmse"] for r in rows],
+            "times": [r["wall_s"] for r in rows],
+            "rmses": [r["rmse"] for r in rows],
             "cpu_times": [r["cpu_s"] for r in rows],
             "samples_per_s": pixels * top["spp"] / top["wall_s"],
             "cpu_per_wall": top["cpu_s"] / top["wall_s"],
@@ -340,41 +403,78 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     t_fit = {name: model_time(m, target) for name, m in model.items()}
     s_inv, s_mit = summary["invrender"], summary["mitsuba"]
     row = {
-        "section": "equal_rmse", "bounces": bounces, "mitsuba_variant": variant,
-        "width": camera.width, "height": camera.height, "target_rmse": target,
-        "t_invrender_s": t_inv, "t_mitsuba_s": t_mit, "ratio": t_mit / t_inv,
+        "section": "equal_rmse",
+        "bounces": bounces,
+        "mitsuba_variant": variant,
+        "width": camera.width,
+        "height": camera.height,
+        "target_rmse": target,
+        "t_invrender_s": t_inv,
+        "t_mitsuba_s": t_mit,
+        "ratio": t_mit / t_inv,
         "ratio_fit": t_fit["mitsuba"] / t_fit["invrender"],
-        "fit_invrender": model["invrender"], "fit_mitsuba": model["mitsuba"], "ratio_cpu": cpu_mit / cpu_inv, "extrapolated": bool(extra_inv or extra_mit),
-        "samples_per_s_invrender": s_inv["samples_per_s"], "samples_per_s_mitsuba": s_mit["samples_per_s"],
+        "fit_invrender": model["invrender"],
+        "fit_mitsuba": model["mitsuba"],
+        "ratio_cpu": cpu_mit / cpu_inv,
+        "extrapolated": bool(extra_inv or extra_mit),
+        "samples_per_s_invrender": s_inv["samples_per_s"],
+        "samples_per_s_mitsuba": s_mit["samples_per_s"],
         "speed_ratio": s_inv["samples_per_s"] / s_mit["samples_per_s"],
-        "var_per_sample_invrender": s_inv["var_per_sample"], "var_per_sample_mitsuba": s_mit["var_per_sample"],
+        "var_per_sample_invrender": s_inv["var_per_sample"],
+        "var_per_sample_mitsuba": s_mit["var_per_sample"],
         "variance_ratio": s_mit["var_per_sample"] / s_inv["var_per_sample"],
-        "cpu_per_wall_invrender": s_inv["cpu_per_wall"], "cpu_per_wall_mitsuba": s_mit["cpu_per_wall"],
+        "cpu_per_wall_invrender": s_inv["cpu_per_wall"],
+        "cpu_per_wall_mitsuba": s_mit["cpu_per_wall"],
         "ref_noise_rmse": math.sqrt(ref_noise),
-        "ref_spp_invrender": converged["invrender"]["spp"], "ref_spp_mitsuba": converged["mitsuba"]["spp"],
-        "mean_rel_diff": check["mean_rel_diff"], "mean_rel_sigma": check["mean_rel_sigma"],
-        "channel_rel_diff": check["channel_rel_diff"], "pixel_excess_rmse": check["pixel_excess_rmse"],
-        "pixel_mse_over_noise": check["pixel_mse_over_noise"], "agreement": verdict(check, min(c["spp"] for c in converged.values())),
-        "features": asdict(features), "bridge_warnings": mit.bridge_warnings,
+        "ref_spp_invrender": converged["invrender"]["spp"],
+        "ref_spp_mitsuba": converged["mitsuba"]["spp"],
+        "mean_rel_diff": check["mean_rel_diff"],
+        "mean_rel_sigma": check["mean_rel_sigma"],
+        "channel_rel_diff": check["channel_rel_diff"],
+        "pixel_excess_rmse": check["pixel_excess_rmse"],
+        "pixel_mse_over_noise": check["pixel_mse_over_noise"],
+        "agreement": verdict(check, min(c["spp"] for c in converged.values())),
+        "features": asdict(features),
+        "bridge_warnings": mit.bridge_warnings,
     }
-    one_steady = {name: median([r["wall"] for r in records if r["renderer"] == name and r["spp"] == settings.ladder[0]])
-                  for name in ("invrender", "mitsuba")}
+    one_steady = {
+        name: median([r["wall"] for r in records if r["renderer"] == name and r["spp"] == settings.ladder[0]])
+        for name in ("invrender", "mitsuba")
+    }
     one_time = [
-        {"section": "one_time", "bounces": bounces, "renderer": "invrender",
-         "scene_s": inv.one_time["pack_s"], "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
-         "setup_s": inv.one_time["init_s"], "setup_what": f"upload + kernel build (binary cache {inv.one_time['kernel_cache']})",
-         "first_render_s": inv.one_time["first_render_s"], "steady_render_s": one_steady["invrender"],
-         "reference_samples_per_s": converged["invrender"]["samples_per_s"]},
-        {"section": "one_time", "bounces": bounces, "renderer": f"mitsuba {variant}",
-         "scene_s": mit.one_time["convert_s"], "scene_what": "scene_to_mitsuba (our bridge)",
-         "setup_s": mit.one_time["load_s"], "setup_what": "mi.load_dict (plugins, BVH)",
-         "first_render_s": mit.one_time["first_render_s"], "steady_render_s": one_steady["mitsuba"],
-         "reference_samples_per_s": converged["mitsuba"]["samples_per_s"]},
+        {
+            "section": "one_time",
+            "bounces": bounces,
+            "renderer": "invrender",
+            "scene_s": inv.one_time["pack_s"],
+            "scene_what": "HostScene.pack (BVH, emitter BVH, tables)",
+            "setup_s": inv.one_time["init_s"],
+            "setup_what": f"upload + kernel build (binary cache {inv.one_time['kernel_cache']})",
+            "first_render_s": inv.one_time["first_render_s"],
+            "steady_render_s": one_steady["invrender"],
+            "reference_samples_per_s": converged["invrender"]["samples_per_s"],
+        },
+        {
+            "section": "one_time",
+            "bounces": bounces,
+            "renderer": f"mitsuba {variant}",
+            "scene_s": mit.one_time["convert_s"],
+            "scene_what": "scene_to_mitsuba (our bridge)",
+            "setup_s": mit.one_time["load_s"],
+            "setup_what": "mi.load_dict (plugins, BVH)",
+            "first_render_s": mit.one_time["first_render_s"],
+            "steady_render_s": one_steady["mitsuba"],
+            "reference_samples_per_s": converged["mitsuba"]["samples_per_s"],
+        },
     ]
     if row["agreement"] == "DIFFER":
-        log.error("B=%d: the converged images differ by %.2f %% in their mean (> 1 %%): a bug in one renderer "
-                  "or the bridge, not noise (sigma %.3f %%)", bounces, 100 * check["mean_rel_diff"],
-                  100 * check["mean_rel_sigma"])
+        log.error(
+            "B=%d: the converged images differ by %.2f %% in their mean (> 1 %%): a bug in one renderer "
+            "or the bridge, not noise (sigma %.3f %%)",
+            bounces,
+            100 * check["mean_rel_diff"],
+            100 * check["mean_rel_sigma"],
+        )
     return row, curves, one_time
 
 
@@ -414,18 +514,33 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     total_bytes = sum(a.nbytes for a in arrays.values())
     geometry_bytes = sum(arrays[k].nbytes for k in GEOMETRY_ARGS)
     result = {
-        "section": "bvh", "triangles": int(len(mesh.faces)), "subdivision": n,
-        "build_s": median(walls), "build_runs": len(walls), "nodes": bvh.n_nodes, "sah_cost": bvh.sah_cost(),
-        "traced_peak_mb": traced_peak / 2**20, "rss_growth_mb": rss.growth / 2**20,
-        "pack_rest_s": pack_wall, "emitters": int(host.num_emitters),
-        "device_mb": total_bytes / 2**20, "geometry_bytes_per_tri": geometry_bytes / len(mesh.faces),
+        "section": "bvh",
+        "triangles": int(len(mesh.faces)),
+        "subdivision": n,
+        "build_s": median(walls),
+        "build_runs": len(walls),
+        "nodes": bvh.n_nodes,
+        "sah_cost": bvh.sah_cost(),
+        "traced_peak_mb": traced_peak / 2**20,
+        "rss_growth_mb": rss.growth / 2**20,
+        "pack_rest_s": pack_wall,
+        "emitters": int(host.num_emitters),
+        "device_mb": total_bytes / 2**20,
+        "geometry_bytes_per_tri": geometry_bytes / len(mesh.faces),
         "device_bytes_per_tri": total_bytes / len(mesh.faces),
     }
 
     # One bounce: camera ray + one scattered ray per sample (2 closest-hit traversals).
     pixels = camera.width * camera.height
-    bare = Features(specular=False, emission=True, emitter_sampling=False, environment=True, window=True,
-                    env_sampling=False, max_bounces=1)
+    bare = Features(
+        specular=False,
+        emission=True,
+        emitter_sampling=False,
+        environment=True,
+        window=True,
+        env_sampling=False,
+        max_bounces=1,
+    )
     for key, features in (("bare", bare), ("all", Features.everything(max_bounces=1))):
         runner = InvrenderRunner(scene, camera, features, device, host=host)
         runner.warm_up()
@@ -447,8 +562,18 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
 def bvh_section(settings: Settings, variant: str, device=None) -> list[dict]:
     rows = []
     for triangles in tqdm(settings.bvh_triangles, desc="bvh sizes", unit="size", leave=False):
-        command = [sys.executable, "-m", "invrender.bench.render", "bvh-probe", "--triangles", str(triangles),
-                   "--mode", settings.mode, "--variant", variant]
+        command = [
+            sys.executable,
+            "-m",
+            "invrender.bench.render",
+            "bvh-probe",
+            "--triangles",
+            str(triangles),
+            "--mode",
+            settings.mode,
+            "--variant",
+            variant,
+        ]
         if settings.width:
             command += ["--width", str(settings.width), "--height", str(settings.height)]
         if not settings.bvh_mitsuba:
@@ -458,9 +583,10 @@ def bvh_section(settings: Settings, variant: str, device=None) -> list[dict]:
         proc = subprocess.run(command, capture_output=True, text=True)
         lines = [line for line in proc.stdout.splitlines() if line.startswith(PROBE_MARK)]
         if proc.returncode != 0 or not lines:
-            raise RuntimeError(f"bvh probe ({triangles} triangles) failed with code {proc.returncode}:\n"
-                               f"{proc.stderr[-4000:]}")
-        rows.append(json.loads(lines[-1][len(PROBE_MARK):]))
+            raise RuntimeError(
+                f"bvh probe ({triangles} triangles) failed with code {proc.returncode}:\n{proc.stderr[-4000:]}"
+            )
+        rows.append(json.loads(lines[-1][len(PROBE_MARK) :]))
     return rows
 
 
@@ -474,7 +600,7 @@ def _interleaved(runners, spp, repeats, desc):
     time, the mean image and the mean per-pixel noise variance of that mean."""
     out = {id(r): {"walls": [], "images": [], "variances": []} for r in runners}
     for rep in tqdm(range(repeats), desc=desc, unit="round", leave=False):
-        for runner in (runners if rep % 2 == 0 else runners[::-1]):
+        for runner in runners if rep % 2 == 0 else runners[::-1]:
             result, wall, _ = clock(runner.render_full, spp)
             out[id(runner)]["walls"].append(wall)
             out[id(runner)]["images"].append(result["radiance"].astype(np.float64))
@@ -483,10 +609,15 @@ def _interleaved(runners, spp, repeats, desc):
     for runner in runners:
         o = out[id(runner)]
         means = [image.mean() for image in o["images"]]
-        stats.append({"wall": median(o["walls"]), "image": np.mean(o["images"], 0),
-                      "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
-                      "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
-                      "var_per_sample": float(np.mean(o["variances"]) * spp)})
+        stats.append(
+            {
+                "wall": median(o["walls"]),
+                "image": np.mean(o["images"], 0),
+                "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
+                "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
+                "var_per_sample": float(np.mean(o["variances"]) * spp),
+            }
+        )
     return stats
 
 
@@ -506,18 +637,29 @@ def features_section(scene, camera, settings: Settings, device=None) -> list[dic
         a, b = _interleaved((special, full), settings.feature_spp, settings.feature_repeats, f"features: {case}")
         check = agreement(a["image"], b["image"], a["var_mean"], b["var_mean"], a["mean_var"], b["mean_var"])
         on = [k for k, v in asdict(analysed).items() if v is True]
-        rows.append({
-            "section": "features", "case": case, "features": ",".join(on) or "(none)",
-            "bounces": analysed.max_bounces, "spp": settings.feature_spp, "repeats": settings.feature_repeats,
-            "t_per_sample_specialised_us": 1e6 * a["wall"] / (pixels * settings.feature_spp),
-            "t_per_sample_everything_us": 1e6 * b["wall"] / (pixels * settings.feature_spp),
-            "speedup": b["wall"] / a["wall"], "mean_rel_diff": check["mean_rel_diff"],
-            "mean_rel_sigma": check["mean_rel_sigma"], "pixel_mse_over_noise": check["pixel_mse_over_noise"],
-            "agreement": verdict(check, settings.feature_spp * settings.feature_repeats),
-        })
+        rows.append(
+            {
+                "section": "features",
+                "case": case,
+                "features": ",".join(on) or "(none)",
+                "bounces": analysed.max_bounces,
+                "spp": settings.feature_spp,
+                "repeats": settings.feature_repeats,
+                "t_per_sample_specialised_us": 1e6 * a["wall"] / (pixels * settings.feature_spp),
+                "t_per_sample_everything_us": 1e6 * b["wall"] / (pixels * settings.feature_spp),
+                "speedup": b["wall"] / a["wall"],
+                "mean_rel_diff": check["mean_rel_diff"],
+                "mean_rel_sigma": check["mean_rel_sigma"],
+                "pixel_mse_over_noise": check["pixel_mse_over_noise"],
+                "agreement": verdict(check, settings.feature_spp * settings.feature_repeats),
+            }
+        )
         if rows[-1]["agreement"] == "DIFFER":
-            log.error("features %s: specialised and all-features images differ by %.2f %% (> 1 %%)",
-                      case, 100 * check["mean_rel_diff"])
+            log.error(
+                "features %s: specialised and all-features images differ by %.2f %% (> 1 %%)",
+                case,
+                100 * check["mean_rel_diff"],
+            )
     return rows
 
 
@@ -545,8 +687,13 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
         ("weights env 0.1, emit 0.1", analysed, 0.1, 0.1, True),
         ("weights env 0.1, emit 0.4", analysed, 0.1, 0.4, True),
         ("weights env 0.4, emit 0.1", analysed, 0.4, 0.1, True),
-        ("Lambertian, no sampling strategies", replace(analysed, specular=False, emitter_sampling=False,
-                                                       env_sampling=False), 0.0, 0.0, False),
+        (
+            "Lambertian, no sampling strategies",
+            replace(analysed, specular=False, emitter_sampling=False, env_sampling=False),
+            0.0,
+            0.0,
+            False,
+        ),
     ]
     pixels = camera.width * camera.height
     host = None
@@ -561,14 +708,23 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     rows = []
     for (name, features, w_env, w_emit, same_image), s in zip(cases, stats):
         t = s["wall"] / (pixels * settings.profile_spp)
-        rows.append({
-            "section": "profile", "case": name, "renderer": "invrender", "bounces": bounces,
-            "t_per_sample_us": 1e6 * t, "var_per_sample": s["var_per_sample"],
-            "efficiency_vs_all": (base["var_per_sample"] * base["wall"]) / (s["var_per_sample"] * s["wall"]),
-            "time_vs_all": s["wall"] / base["wall"],
-            "mean_rel_diff_vs_all": agreement(s["image"], base["image"], s["var_mean"], base["var_mean"])["mean_rel_diff"]
-            if same_image else None,
-        })
+        rows.append(
+            {
+                "section": "profile",
+                "case": name,
+                "renderer": "invrender",
+                "bounces": bounces,
+                "t_per_sample_us": 1e6 * t,
+                "var_per_sample": s["var_per_sample"],
+                "efficiency_vs_all": (base["var_per_sample"] * base["wall"]) / (s["var_per_sample"] * s["wall"]),
+                "time_vs_all": s["wall"] / base["wall"],
+                "mean_rel_diff_vs_all": agreement(s["image"], base["image"], s["var_mean"], base["var_mean"])[
+                    "mean_rel_diff"
+                ]
+                if same_image
+                else None,
+            }
+        )
 
     # Mitsuba at the same depth: time and variance per sample from pairs of independent renders.
     mit = MitsubaRunner(scene, camera, bounces, variant)
@@ -581,16 +737,30 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     pair_var = np.mean([np.mean((images[k] - images[k + 1]) ** 2) / 2 for k in range(len(images) - 1)])
     t = median(walls) / (pixels * settings.profile_spp)
     var = float(pair_var * settings.profile_spp)
-    rows.append({
-        "section": "profile", "case": f"mitsuba {variant} path", "renderer": "mitsuba", "bounces": bounces,
-        "t_per_sample_us": 1e6 * t, "var_per_sample": var,
-        "efficiency_vs_all": (base["var_per_sample"] * base["wall"] / (pixels * settings.profile_spp)) / (var * t),
-        "time_vs_all": t / (base["wall"] / (pixels * settings.profile_spp)), "mean_rel_diff_vs_all": None,
-    })
+    rows.append(
+        {
+            "section": "profile",
+            "case": f"mitsuba {variant} path",
+            "renderer": "mitsuba",
+            "bounces": bounces,
+            "t_per_sample_us": 1e6 * t,
+            "var_per_sample": var,
+            "efficiency_vs_all": (base["var_per_sample"] * base["wall"] / (pixels * settings.profile_spp)) / (var * t),
+            "time_vs_all": t / (base["wall"] / (pixels * settings.profile_spp)),
+            "mean_rel_diff_vs_all": None,
+        }
+    )
 
     # One bounce (B = 1) ray throughput on the room as it is.
-    bare = Features(specular=False, emission=True, emitter_sampling=False, environment=True, window=True,
-                    env_sampling=False, max_bounces=1)
+    bare = Features(
+        specular=False,
+        emission=True,
+        emitter_sampling=False,
+        environment=True,
+        window=True,
+        env_sampling=False,
+        max_bounces=1,
+    )
     one = [InvrenderRunner(scene, camera, f, device, host=host) for f in (bare, replace(analysed, max_bounces=1))]
     for r in one:
         r.warm_up()
@@ -601,12 +771,23 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     for rep in tqdm(range(settings.profile_repeats), desc="one-bounce throughput", leave=False):
         for r in (*one, mit1) if rep % 2 == 0 else (mit1, *one[::-1]):
             walls[id(r)].append(clock(r.render, spp)[1])
-    for name, r, rays in (("one bounce, Lambertian closest-hit only", one[0], 2),
-                          ("one bounce, all features", one[1], 2),
-                          (f"one bounce, mitsuba {variant} (max_depth 2)", mit1, 3)):
+    for name, r, rays in (
+        ("one bounce, Lambertian closest-hit only", one[0], 2),
+        ("one bounce, all features", one[1], 2),
+        (f"one bounce, mitsuba {variant} (max_depth 2)", mit1, 3),
+    ):
         rate = pixels * spp / median(walls[id(r)])
-        rows.append({"section": "profile", "case": name, "renderer": r.name, "bounces": 1,
-                     "t_per_sample_us": 1e6 / rate, "rays_per_s": rays * rate, "samples_per_s": rate})
+        rows.append(
+            {
+                "section": "profile",
+                "case": name,
+                "renderer": r.name,
+                "bounces": 1,
+                "t_per_sample_us": 1e6 / rate,
+                "rays_per_s": rays * rate,
+                "samples_per_s": rate,
+            }
+        )
     return rows
 
 
@@ -615,38 +796,99 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
 # ---------------------------------------------------------------------------------------------
 
 TABLES = {
-    "equal_rmse": ("Time to equal RMSE (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender faster)", [
-        ("bounces", "B", "d"), ("width", "W", "d"), ("height", "H", "d"), ("target_rmse", "target RMSE", ".4g"),
-        ("t_invrender_s", "t inv [s]", ".3g"), ("t_mitsuba_s", "t mi [s]", ".3g"), ("ratio", "ratio", ".3f"),
-        ("ratio_fit", "ratio (fit)", ".3f"), ("ratio_cpu", "ratio (CPU time)", ".3f"),
-        ("speed_ratio", "samples/s inv/mi", ".3f"),
-        ("variance_ratio", "var/sample mi/inv", ".3f"), ("ref_noise_rmse", "ref noise RMSE", ".2g"),
-        ("mean_rel_diff", "mean rel diff", "+.3%"), ("mean_rel_sigma", "(1 sigma)", ".3%"),
-        ("agreement", "images", "s"), ("pixel_excess_rmse", "pixel bias RMSE", ".2g")]),
-    "one_time": ("One-time costs, excluded from the times above [s]", [
-        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("scene_s", "scene", ".3f"), ("scene_what", "= what", "s"),
-        ("setup_s", "setup", ".3f"), ("setup_what", "= what", "s"), ("first_render_s", "first render (1 spp)", ".3f"),
-        ("steady_render_s", "later 1-spp render", ".4f"), ("reference_samples_per_s", "samples/s (reference)", ".3g")]),
-    "curves": ("RMSE against time (the ladders; RMSE with the reference's noise removed)", [
-        ("bounces", "B", "d"), ("renderer", "renderer", "s"), ("spp", "spp", "d"), ("wall_s", "wall [s]", ".4f"),
-        ("wall_min_s", "min", ".4f"), ("wall_max_s", "max", ".4f"), ("cpu_s", "cpu [s]", ".4f"), ("rmse", "RMSE", ".4g"),
-        ("rmse_raw", "RMSE raw", ".4g")]),
-    "bvh": ("BVH build and one-bounce throughput at scale (room subdivided)", [
-        ("triangles", "triangles", "d"), ("build_s", "build [s]", ".2f"), ("traced_peak_mb", "peak alloc [MB]", ".0f"),
-        ("rss_growth_mb", "peak RSS growth [MB]", ".0f"), ("pack_rest_s", "rest of pack [s]", ".2f"),
-        ("geometry_bytes_per_tri", "geometry B/tri", ".1f"), ("device_bytes_per_tri", "device B/tri", ".1f"),
-        ("invrender_bare_rays_per_s", "inv rays/s bare", ".3g"), ("invrender_all_rays_per_s", "inv rays/s all", ".3g"),
-        ("mitsuba_rays_per_s", "mi rays/s", ".3g"), ("mitsuba_load_s", "mi load [s]", ".2f")]),
-    "features": ("Specialised kernels against the all-features kernel (time per sample, median of repeats)", [
-        ("case", "case", "s"), ("features", "analysed features", "s"), ("bounces", "B", "d"),
-        ("t_per_sample_specialised_us", "specialised [us]", ".3f"), ("t_per_sample_everything_us", "everything [us]", ".3f"),
-        ("speedup", "speed-up", ".3f"), ("mean_rel_diff", "mean rel diff", "+.3%"), ("mean_rel_sigma", "(1 sigma)", ".3%"),
-        ("agreement", "images", "s"), ("pixel_mse_over_noise", "pixel MSE / noise", ".2f")]),
-    "profile": ("Profile of invrender (default room): time, variance and efficiency = 1 / (variance x time) per sample", [
-        ("case", "case", "s"), ("bounces", "B", "d"), ("t_per_sample_us", "t/sample [us]", ".3f"),
-        ("var_per_sample", "var/sample", ".4g"), ("time_vs_all", "time vs all", ".3f"),
-        ("efficiency_vs_all", "efficiency vs all", ".3f"), ("mean_rel_diff_vs_all", "mean rel diff", "+.2%"),
-        ("rays_per_s", "rays/s", ".3g")]),
+    "equal_rmse": (
+        "Time to equal RMSE (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender faster)",
+        [
+            ("bounces", "B", "d"),
+            ("width", "W", "d"),
+            ("height", "H", "d"),
+            ("target_rmse", "target RMSE", ".4g"),
+            ("t_invrender_s", "t inv [s]", ".3g"),
+            ("t_mitsuba_s", "t mi [s]", ".3g"),
+            ("ratio", "ratio", ".3f"),
+            ("ratio_fit", "ratio (fit)", ".3f"),
+            ("ratio_cpu", "ratio (CPU time)", ".3f"),
+            ("speed_ratio", "samples/s inv/mi", ".3f"),
+            ("variance_ratio", "var/sample mi/inv", ".3f"),
+            ("ref_noise_rmse", "ref noise RMSE", ".2g"),
+            ("mean_rel_diff", "mean rel diff", "+.3%"),
+            ("mean_rel_sigma", "(1 sigma)", ".3%"),
+            ("agreement", "images", "s"),
+            ("pixel_excess_rmse", "pixel bias RMSE", ".2g"),
+        ],
+    ),
+    "one_time": (
+        "One-time costs, excluded from the times above [s]",
+        [
+            ("bounces", "B", "d"),
+            ("renderer", "renderer", "s"),
+            ("scene_s", "scene", ".3f"),
+            ("scene_what", "= what", "s"),
+            ("setup_s", "setup", ".3f"),
+            ("setup_what", "= what", "s"),
+            ("first_render_s", "first render (1 spp)", ".3f"),
+            ("steady_render_s", "later 1-spp render", ".4f"),
+            ("reference_samples_per_s", "samples/s (reference)", ".3g"),
+        ],
+    ),
+    "curves": (
+        "RMSE against time (the ladders; RMSE with the reference's noise removed)",
+        [
+            ("bounces", "B", "d"),
+            ("renderer", "renderer", "s"),
+            ("spp", "spp", "d"),
+            ("wall_s", "wall [s]", ".4f"),
+            ("wall_min_s", "min", ".4f"),
+            ("wall_max_s", "max", ".4f"),
+            ("cpu_s", "cpu [s]", ".4f"),
+            ("rmse", "RMSE", ".4g"),
+            ("rmse_raw", "RMSE raw", ".4g"),
+        ],
+    ),
+    "bvh": (
+        "BVH build and one-bounce throughput at scale (room subdivided)",
+        [
+            ("triangles", "triangles", "d"),
+            ("build_s", "build [s]", ".2f"),
+            ("traced_peak_mb", "peak alloc [MB]", ".0f"),
+            ("rss_growth_mb", "peak RSS growth [MB]", ".0f"),
+            ("pack_rest_s", "rest of pack [s]", ".2f"),
+            ("geometry_bytes_per_tri", "geometry B/tri", ".1f"),
+            ("device_bytes_per_tri", "device B/tri", ".1f"),
+            ("invrender_bare_rays_per_s", "inv rays/s bare", ".3g"),
+            ("invrender_all_rays_per_s", "inv rays/s all", ".3g"),
+            ("mitsuba_rays_per_s", "mi rays/s", ".3g"),
+            ("mitsuba_load_s", "mi load [s]", ".2f"),
+        ],
+    ),
+    "features": (
+        "Specialised kernels against the all-features kernel (time per sample, median of repeats)",
+        [
+            ("case", "case", "s"),
+            ("features", "analysed features", "s"),
+            ("bounces", "B", "d"),
+            ("t_per_sample_specialised_us", "specialised [us]", ".3f"),
+            ("t_per_sample_everything_us", "everything [us]", ".3f"),
+            ("speedup", "speed-up", ".3f"),
+            ("mean_rel_diff", "mean rel diff", "+.3%"),
+            ("mean_rel_sigma", "(1 sigma)", ".3%"),
+            ("agreement", "images", "s"),
+            ("pixel_mse_over_noise", "pixel MSE / noise", ".2f"),
+        ],
+    ),
+    "profile": (
+        "Profile of invrender (default room): time, variance and efficiency = 1 / (variance x time) per sample",
+        [
+            ("case", "case", "s"),
+            ("bounces", "B", "d"),
+            ("t_per_sample_us", "t/sample [us]", ".3f"),
+            ("var_per_sample", "var/sample", ".4g"),
+            ("time_vs_all", "time vs all", ".3f"),
+            ("efficiency_vs_all", "efficiency vs all", ".3f"),
+            ("mean_rel_diff_vs_all", "mean rel diff", "+.2%"),
+            ("rays_per_s", "rays/s", ".3g"),
+        ],
+    ),
 }
 
 
@@ -656,8 +898,9 @@ TABLES = {
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
-    settings, out, variant, notes, started, load_start = start_run("render", QUICK if quick else FULL, out,
-                                                                    scalar_settings)
+    settings, out, variant, notes, started, load_start = start_run(
+        "render", QUICK if quick else FULL, out, scalar_settings
+    )
 
     scene, _ = room_scene(settings.width, settings.height)
     camera = scene.cameras[settings.view]
@@ -668,11 +911,16 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         results["curves"] += curves
         results["one_time"] += one_time
         if row["agreement"] not in ("agree", "not checked"):
-            notes.append(f"B={bounces}: converged invrender and Mitsuba images differ by "
-                         f"{100 * row['mean_rel_diff']:+.2f} % in their mean (1 sigma "
-                         f"{100 * row['mean_rel_sigma']:.2f} %): "
-                         + ("a bug, not noise" if row["agreement"] == "DIFFER" else
-                            "within the noise of this run's references (quick runs cannot resolve 1 %)"))
+            notes.append(
+                f"B={bounces}: converged invrender and Mitsuba images differ by "
+                f"{100 * row['mean_rel_diff']:+.2f} % in their mean (1 sigma "
+                f"{100 * row['mean_rel_sigma']:.2f} %): "
+                + (
+                    "a bug, not noise"
+                    if row["agreement"] == "DIFFER"
+                    else "within the noise of this run's references (quick runs cannot resolve 1 %)"
+                )
+            )
 
     for warning in sorted({w for row in results["equal_rmse"] for w in row["bridge_warnings"]}):
         notes.append(f"mitsuba bridge: {warning}")
@@ -682,9 +930,11 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     results["features"] = features_section(scene, camera, settings, device)
     for row in results["features"]:
         if row["agreement"] not in ("agree", "not checked"):
-            notes.append(f"features, {row['case']}: specialised and all-features images differ by "
-                         f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
-                         + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run"))
+            notes.append(
+                f"features, {row['case']}: specialised and all-features images differ by "
+                f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
+                + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run")
+            )
     log.info("profile ...")
     results["profile"] = profile_section(scene, camera, settings, variant, device)
 
@@ -694,12 +944,24 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     machine = machine_info(device)
     machine["load_average_start"] = load_start
     machine["load_average_end"] = os.getloadavg()
-    report = {"benchmark": "render", "mode": settings.mode, "mitsuba_variant": variant, "settings": asdict(settings),
-              "machine": machine, "seconds": time.time() - started, "notes": notes, **results}
+    report = {
+        "benchmark": "render",
+        "mode": settings.mode,
+        "mitsuba_variant": variant,
+        "settings": asdict(settings),
+        "machine": machine,
+        "seconds": time.time() - started,
+        "notes": notes,
+        **results,
+    }
 
-    title = (f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
-             f"room view {settings.view}; {report['seconds']:.0f} s)")
-    write_report(out, "render", title, report, TABLES, ("equal_rmse", "one_time", "curves", "bvh", "features", "profile"))
+    title = (
+        f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
+        f"room view {settings.view}; {report['seconds']:.0f} s)"
+    )
+    write_report(
+        out, "render", title, report, TABLES, ("equal_rmse", "one_time", "curves", "bvh", "features", "profile")
+    )
     return report
 
 
@@ -716,8 +978,12 @@ def _main(argv=None) -> int:
     p.add_argument("--device")
     args = parser.parse_args(argv)
     settings = QUICK if args.mode == "quick" else FULL
-    settings = replace(settings, width=args.width or settings.width, height=args.height or settings.height,
-                       bvh_mitsuba=settings.bvh_mitsuba and not args.no_mitsuba)
+    settings = replace(
+        settings,
+        width=args.width or settings.width,
+        height=args.height or settings.height,
+        bvh_mitsuba=settings.bvh_mitsuba and not args.no_mitsuba,
+    )
     quiet_pyopencl()
     result = bvh_probe(args.triangles, settings, args.device, args.variant)
     print(PROBE_MARK + json.dumps(result), flush=True)

@@ -34,8 +34,16 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdRender, Vt
 from ..scene.types import Camera, SceneError
 from . import schema
 
-__all__ = ["FILM_WIDTH", "Lens", "lens_of", "camera_from_lens", "camera_to_world_gl", "author_camera",
-           "author_render_product", "read_camera"]
+__all__ = [
+    "FILM_WIDTH",
+    "Lens",
+    "lens_of",
+    "camera_from_lens",
+    "camera_to_world_gl",
+    "author_camera",
+    "author_render_product",
+    "read_camera",
+]
 
 log = logging.getLogger(__name__)
 
@@ -66,8 +74,14 @@ def lens_of(camera: Camera) -> Lens:
     focal = fx * pitch_x
     pitch_y = focal / fy
     f32 = lambda value: float(np.float32(value))
-    return Lens(f32(focal), f32(w * pitch_x), f32(h * pitch_y), f32((w / 2 - cx) * pitch_x),
-                f32((cy - h / 2) * pitch_y), pitch_x / pitch_y)
+    return Lens(
+        f32(focal),
+        f32(w * pitch_x),
+        f32(h * pitch_y),
+        f32((w / 2 - cx) * pitch_x),
+        f32((cy - h / 2) * pitch_y),
+        pitch_x / pitch_y,
+    )
 
 
 def camera_from_lens(lens_values, width: int, height: int) -> tuple[float, float, float, float]:
@@ -96,9 +110,13 @@ def _numpy_matrix(m: Gf.Matrix4d) -> np.ndarray:
 def author_camera(stage: Usd.Stage, path: str, camera: Camera, clipping: tuple[float, float]) -> UsdGeom.Camera:
     """A UsdGeom.Camera reproducing `camera`, with the exact COLMAP camera in invrender: attributes."""
     if np.any(camera.distortion != 0):
-        log.warning("camera %s: OPENCV distortion %s cannot be expressed in UsdGeom.Camera: other tools see "
-                    "its pinhole part (invrender keeps the distortion in %s)", camera.name,
-                    np.round(camera.distortion, 6).tolist(), schema.COLMAP_PARAMS)
+        log.warning(
+            "camera %s: OPENCV distortion %s cannot be expressed in UsdGeom.Camera: other tools see "
+            "its pinhole part (invrender keeps the distortion in %s)",
+            camera.name,
+            np.round(camera.distortion, 6).tolist(),
+            schema.COLMAP_PARAMS,
+        )
     lens = lens_of(camera)
     usd = UsdGeom.Camera.Define(stage, path)
     usd.CreateProjectionAttr(UsdGeom.Tokens.perspective)
@@ -114,13 +132,17 @@ def author_camera(stage: Usd.Stage, path: str, camera: Camera, clipping: tuple[f
     prim.CreateAttribute(schema.COLMAP_NAME, Sdf.ValueTypeNames.String, custom=True).Set(camera.name)
     prim.CreateAttribute(schema.COLMAP_MODEL, Sdf.ValueTypeNames.Token, custom=True).Set(camera.model)
     prim.CreateAttribute(schema.COLMAP_PARAMS, Sdf.ValueTypeNames.DoubleArray, custom=True).Set(
-        Vt.DoubleArray([float(p) for p in camera.params]))
+        Vt.DoubleArray([float(p) for p in camera.params])
+    )
     prim.CreateAttribute(schema.COLMAP_SIZE, Sdf.ValueTypeNames.Int2, custom=True).Set(
-        Gf.Vec2i(int(camera.width), int(camera.height)))
+        Gf.Vec2i(int(camera.width), int(camera.height))
+    )
     prim.CreateAttribute(schema.COLMAP_R, Sdf.ValueTypeNames.Matrix3d, custom=True).Set(
-        Gf.Matrix3d(np.asarray(camera.R, np.float64).tolist()))
+        Gf.Matrix3d(np.asarray(camera.R, np.float64).tolist())
+    )
     prim.CreateAttribute(schema.COLMAP_T, Sdf.ValueTypeNames.Double3, custom=True).Set(
-        Gf.Vec3d(*(float(v) for v in camera.t)))
+        Gf.Vec3d(*(float(v) for v in camera.t))
+    )
     return usd
 
 
@@ -140,20 +162,42 @@ def _get(prim: Usd.Prim, name: str):
 
 def _stored_camera(prim: Usd.Prim) -> Camera | None:
     """The exact COLMAP camera the export stored, if all of it is there."""
-    values = [_get(prim, name) for name in (schema.COLMAP_NAME, schema.COLMAP_MODEL, schema.COLMAP_PARAMS,
-                                             schema.COLMAP_SIZE, schema.COLMAP_R, schema.COLMAP_T)]
+    values = [
+        _get(prim, name)
+        for name in (
+            schema.COLMAP_NAME,
+            schema.COLMAP_MODEL,
+            schema.COLMAP_PARAMS,
+            schema.COLMAP_SIZE,
+            schema.COLMAP_R,
+            schema.COLMAP_T,
+        )
+    ]
     if any(v is None for v in values):
         return None
     name, model, params, size, R, t = values
-    return Camera(name=str(name), model=str(model), width=int(size[0]), height=int(size[1]),
-                  params=np.array(list(params), np.float64), R=np.array(R, np.float64),
-                  t=np.array(list(t), np.float64))
+    return Camera(
+        name=str(name),
+        model=str(model),
+        width=int(size[0]),
+        height=int(size[1]),
+        params=np.array(list(params), np.float64),
+        R=np.array(R, np.float64),
+        t=np.array(list(t), np.float64),
+    )
 
 
 def _authored_lens(usd: UsdGeom.Camera) -> tuple:
-    return tuple(float(attr.Get()) for attr in (usd.GetFocalLengthAttr(), usd.GetHorizontalApertureAttr(),
-                                                 usd.GetVerticalApertureAttr(), usd.GetHorizontalApertureOffsetAttr(),
-                                                 usd.GetVerticalApertureOffsetAttr()))
+    return tuple(
+        float(attr.Get())
+        for attr in (
+            usd.GetFocalLengthAttr(),
+            usd.GetHorizontalApertureAttr(),
+            usd.GetVerticalApertureAttr(),
+            usd.GetHorizontalApertureOffsetAttr(),
+            usd.GetVerticalApertureOffsetAttr(),
+        )
+    )
 
 
 def _pose(camera_to_world: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -165,8 +209,9 @@ def _pose(camera_to_world: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarr
     return R, -R @ camera_to_world[:3, 3]
 
 
-def read_camera(prim: Usd.Prim, to_scene: np.ndarray, resolution: tuple[int, int] | None, where: str,
-                exact: bool = True) -> Camera:
+def read_camera(
+    prim: Usd.Prim, to_scene: np.ndarray, resolution: tuple[int, int] | None, where: str, exact: bool = True
+) -> Camera:
     """The COLMAP camera of a UsdGeom.Camera prim. `to_scene` maps the stage's world to ours
     (units, up axis); `resolution` is its RenderProduct's, if any. With `exact`, the stored COLMAP
     camera wins wherever the USD lens and pose are still the ones it gives (an edit wins)."""
@@ -181,8 +226,9 @@ def read_camera(prim: Usd.Prim, to_scene: np.ndarray, resolution: tuple[int, int
     else:
         size = _get(prim, schema.COLMAP_SIZE)
         if size is None:
-            raise SceneError(where, f"camera {prim.GetPath()} resolution",
-                             "a RenderProduct naming this camera, with a resolution")
+            raise SceneError(
+                where, f"camera {prim.GetPath()} resolution", "a RenderProduct naming this camera, with a resolution"
+            )
         width, height = int(size[0]), int(size[1])
 
     lens = _authored_lens(usd)

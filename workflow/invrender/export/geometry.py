@@ -23,7 +23,16 @@ from pxr import Sdf, Usd, UsdGeom, Vt
 from ..scene.types import Mesh, SceneError
 from . import schema
 
-__all__ = ["MeshPiece", "piece_of", "weld", "face_normals", "connected_faces", "author_mesh", "read_mesh", "authored_value"]
+__all__ = [
+    "MeshPiece",
+    "piece_of",
+    "weld",
+    "face_normals",
+    "connected_faces",
+    "author_mesh",
+    "read_mesh",
+    "authored_value",
+]
 
 
 @dataclass
@@ -43,9 +52,14 @@ def piece_of(mesh: Mesh, face_ids: np.ndarray, instance_id: int = 0) -> MeshPiec
     """The faces `face_ids` of `mesh` with the vertices they use (in the mesh's vertex order)."""
     face_ids = np.asarray(face_ids, np.int64)
     vertex_ids, local = np.unique(mesh.faces[face_ids], return_inverse=True)
-    return MeshPiece(positions=mesh.positions[vertex_ids], uvs=mesh.uvs[vertex_ids],
-                     faces=local.reshape(-1, 3).astype(np.int32), face_ids=face_ids, vertex_ids=vertex_ids,
-                     instance_id=int(instance_id))
+    return MeshPiece(
+        positions=mesh.positions[vertex_ids],
+        uvs=mesh.uvs[vertex_ids],
+        faces=local.reshape(-1, 3).astype(np.int32),
+        face_ids=face_ids,
+        vertex_ids=vertex_ids,
+        instance_id=int(instance_id),
+    )
 
 
 def weld(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,9 +139,11 @@ def write_indices(prim: Usd.Prim, piece: MeshPiece) -> None:
     """The scene's face and vertex numbers and the instance id of a piece, on `prim`."""
     if piece.face_ids is not None:
         prim.CreateAttribute(schema.FACE_INDICES, Sdf.ValueTypeNames.IntArray, custom=True).Set(
-            _int_array(piece.face_ids))
+            _int_array(piece.face_ids)
+        )
         prim.CreateAttribute(schema.VERTEX_INDICES, Sdf.ValueTypeNames.IntArray, custom=True).Set(
-            _int_array(piece.vertex_ids))
+            _int_array(piece.vertex_ids)
+        )
     prim.CreateAttribute(schema.INSTANCE_ID, Sdf.ValueTypeNames.Int, custom=True).Set(int(piece.instance_id))
 
 
@@ -136,7 +152,6 @@ def _fan(counts: np.ndarray, where: str) -> np.ndarray:
     if np.any(counts < 3):
         raise SceneError(where, "faceVertexCounts", "polygons of at least 3 corners")
     per_polygon = counts - 2
-    polygon = np.repeat(np.arange(len(counts)), per_polygon)
     first = np.repeat(np.cumsum(counts) - counts, per_polygon)
     j = np.arange(per_polygon.sum()) - np.repeat(np.cumsum(per_polygon) - per_polygon, per_polygon) + 1
     return np.stack([first, first + j, first + j + 1], axis=1)
@@ -195,5 +210,11 @@ def read_mesh(prim: Usd.Prim, indices_prim: Usd.Prim | None = None) -> MeshPiece
     if face_ids is None or vertex_ids is None or len(face_ids) != len(faces) or len(vertex_ids) != len(positions):
         face_ids = vertex_ids = None  # not ours, or its topology was edited: keep its own order
     instance_id = authored_value(source, schema.INSTANCE_ID)
-    return MeshPiece(positions=positions, uvs=uvs, faces=faces.astype(np.int32), face_ids=face_ids,
-                     vertex_ids=vertex_ids, instance_id=int(instance_id or 0))
+    return MeshPiece(
+        positions=positions,
+        uvs=uvs,
+        faces=faces.astype(np.int32),
+        face_ids=face_ids,
+        vertex_ids=vertex_ids,
+        instance_id=int(instance_id or 0),
+    )

@@ -35,8 +35,8 @@ from pxr import Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from ..scene.atomic import check_output
 from ..scene.format import write_scene
-from ..scene.regions import face_texels
 from ..scene.packing import object_transform, pack_scene
+from ..scene.regions import face_texels
 from ..scene.types import Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 from . import schema
 from .cameras import read_camera
@@ -142,8 +142,11 @@ def _read_mesh_prim(prim: Usd.Prim, to_scene: np.ndarray, contents: StageContent
     key = str(material.GetPath()) if material else ""
     if key not in contents.materials:
         contents.materials[key] = read_material(material, where, exact)
-    contents.pieces.append(ImportedPiece(str(prim.GetPath()), piece, key, light_radiance(prim), role,
-                                         world if instance is not None else None))
+    contents.pieces.append(
+        ImportedPiece(
+            str(prim.GetPath()), piece, key, light_radiance(prim), role, world if instance is not None else None
+        )
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -198,8 +201,9 @@ def assemble(pieces: list[MeshPiece]) -> tuple[Mesh, np.ndarray]:
     face_keys = np.concatenate(_fresh([p.face_ids for p in pieces], [len(p.faces) for p in pieces]))
     face_keys = _settle(face_keys)
     order = np.argsort(face_keys, kind="stable")
-    mesh = Mesh(positions=positions[first], faces=faces[order].astype(np.int32), uvs=uvs[first],
-                instance_ids=instance[order])
+    mesh = Mesh(
+        positions=positions[first], faces=faces[order].astype(np.int32), uvs=uvs[first], instance_ids=instance[order]
+    )
     return mesh, owner[order]
 
 
@@ -242,8 +246,14 @@ def bake_maps(mesh: Mesh, owner: np.ndarray, contents: StageContents, exact: boo
         for name in differs:
             flat = maps[name].reshape(shape[0] * shape[1], -1)  # a view: the maps are contiguous
             flat[texels] = evaluated[piece.material][name].reshape(flat.shape)[texels]
-        log.info("%s: material %s differs from %s in %s: baked under its %d faces", piece.prim, piece.material,
-                 base_key, ", ".join(differs), int((owner == k).sum()))
+        log.info(
+            "%s: material %s differs from %s in %s: baked under its %d faces",
+            piece.prim,
+            piece.material,
+            base_key,
+            ", ".join(differs),
+            int((owner == k).sum()),
+        )
     _apply_lights(mesh, owner, contents, maps, shape, exact)
     return maps
 
@@ -265,8 +275,12 @@ def _apply_lights(mesh, owner, contents: StageContents, maps: dict, shape, exact
             continue
         ratio = np.where(current > 0, piece.light / np.where(current > 0, current, 1.0), 0.0)
         ke[texels] = np.where(current > 0, ke[texels] * ratio, piece.light)
-        log.info("%s: light radiance %s is not its emission's mean %s: ke scaled to match", piece.prim,
-                 np.round(piece.light, 4).tolist(), np.round(current, 4).tolist())
+        log.info(
+            "%s: light radiance %s is not its emission's mean %s: ke scaled to match",
+            piece.prim,
+            np.round(piece.light, 4).tolist(),
+            np.round(current, 4).tolist(),
+        )
 
 
 def _clip(maps: dict[str, np.ndarray], where: str) -> dict[str, np.ndarray]:
@@ -344,7 +358,8 @@ def read_objects(stage: Usd.Stage, where: str, exact: bool, materials: dict) -> 
         if key not in materials:
             materials[key] = (read_material(material, where, exact), _set_name(material))
         objects[str(owner.GetPath())].pieces.append(
-            ImportedPiece(str(prim.GetPath()), piece, key, light_radiance(prim), _role(prim) or "surface"))
+            ImportedPiece(str(prim.GetPath()), piece, key, light_radiance(prim), _role(prim) or "surface")
+        )
     return [obj for obj in objects.values() if obj.pieces]
 
 
@@ -381,8 +396,12 @@ def objects_to_scene(stage: Usd.Stage, where: str, exact: bool) -> Scene:
         main = max(weights, key=weights.get)
         others = sorted(set(weights) - {main})
         if others:
-            log.warning("%s: meshes bound to %s besides its material %s: a v2 object has one material set, "
-                        "theirs are not kept", obj.prim.GetPath(), ", ".join(others), main)
+            log.warning(
+                "%s: meshes bound to %s besides its material %s: a v2 object has one material set, theirs are not kept",
+                obj.prim.GetPath(),
+                ", ".join(others),
+                main,
+            )
         sources, set_name = materials[main]
         if set_name not in sets:
             sets[set_name] = Atlas(**_object_maps(obj, mesh, owner, sources, exact, where))
@@ -392,9 +411,16 @@ def objects_to_scene(stage: Usd.Stage, where: str, exact: bool) -> Scene:
             unique, k = f"{name}_{k}", k + 1
         taken.add(unique)
         instance_id = authored_value(obj.prim, schema.INSTANCE_ID)
-        objects.append(SceneObject(unique, mesh, set_name, obj.world,
-                                   instance_id=None if instance_id is None else int(instance_id),
-                                   emission_sides=str(authored_value(obj.prim, schema.EMISSION_SIDES) or "two")))
+        objects.append(
+            SceneObject(
+                unique,
+                mesh,
+                set_name,
+                obj.world,
+                instance_id=None if instance_id is None else int(instance_id),
+                emission_sides=str(authored_value(obj.prim, schema.EMISSION_SIDES) or "two"),
+            )
+        )
     contents = read_stage(stage, where, exact, meshes=False)
     kg = contents.kg if contents.kg is not None else np.zeros((6, DEFAULT_CUBE, DEFAULT_CUBE, 3), np.float32)
     return pack_scene(objects, sets, kg.astype(np.float32), contents.cameras)
@@ -413,14 +439,26 @@ def _metadata(contents: StageContents, usd_path: Path, exact: bool) -> dict:
         if item.role in ("surface", "instance") and instance not in names:
             names[instance] = Path(item.prim).parent.name if item.instance_pose is not None else Path(item.prim).name
         if item.instance_pose is not None and instance not in {p["instance_id"] for p in poses}:
-            poses.append({"instance_id": int(instance), "mask_value": int(instance), "registered": True,
-                          "T_obj2world": item.instance_pose.tolist()})
-    metadata = {"imported_from": str(usd_path), "exact": exact,
-                "instances": [{"instance_id": int(k), "name": v} for k, v in sorted(names.items())]}
+            poses.append(
+                {
+                    "instance_id": int(instance),
+                    "mask_value": int(instance),
+                    "registered": True,
+                    "T_obj2world": item.instance_pose.tolist(),
+                }
+            )
+    metadata = {
+        "imported_from": str(usd_path),
+        "exact": exact,
+        "instances": [{"instance_id": int(k), "name": v} for k, v in sorted(names.items())],
+    }
     if poses:
-        metadata["poses"] = {"convention": "p_world = T_obj2world @ [p_obj, 1]; T_obj2world row-major 4x4; "
-                             "object frame = the USD prototype's", "scale": "as the USD stage",
-                             "instances": sorted(poses, key=lambda p: p["instance_id"])}
+        metadata["poses"] = {
+            "convention": "p_world = T_obj2world @ [p_obj, 1]; T_obj2world row-major 4x4; "
+            "object frame = the USD prototype's",
+            "scale": "as the USD stage",
+            "instances": sorted(poses, key=lambda p: p["instance_id"]),
+        }
     return metadata
 
 
@@ -445,8 +483,14 @@ def import_usd(usd_path, out_dir, exact: bool = True) -> Scene:
         scene = objects_to_scene(stage, where, exact)
         _check_camera_names(scene.cameras, usd_path)
         write_scene(out_dir, scene, metadata={"imported_from": str(usd_path), "exact": exact})
-        log.info("imported %s -> %s: %d objects, %d faces, %d cameras", usd_path, out_dir, len(scene.objects),
-                 len(scene.mesh.faces), len(scene.cameras))
+        log.info(
+            "imported %s -> %s: %d objects, %d faces, %d cameras",
+            usd_path,
+            out_dir,
+            len(scene.objects),
+            len(scene.mesh.faces),
+            len(scene.cameras),
+        )
         return scene
     contents = read_stage(stage, where, exact)
     if not contents.pieces:
@@ -457,6 +501,13 @@ def import_usd(usd_path, out_dir, exact: bool = True) -> Scene:
     _check_camera_names(contents.cameras, usd_path)
     scene = Scene(mesh=mesh, maps=Maps(**maps, kg=kg.astype(np.float32)), cameras=contents.cameras)
     write_scene(out_dir, scene, metadata=_metadata(contents, usd_path, exact))
-    log.info("imported %s -> %s: %d faces, %d cameras, atlas %dx%d%s", usd_path, out_dir, len(mesh.faces),
-             len(scene.cameras), *maps["kd"].shape[:2], "" if exact else " (standard schemas only)")
+    log.info(
+        "imported %s -> %s: %d faces, %d cameras, atlas %dx%d%s",
+        usd_path,
+        out_dir,
+        len(mesh.faces),
+        len(scene.cameras),
+        *maps["kd"].shape[:2],
+        "" if exact else " (standard schemas only)",
+    )
     return scene

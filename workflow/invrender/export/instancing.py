@@ -74,8 +74,11 @@ def find_duplicates(mesh: Mesh, poses: list[dict], eligible: np.ndarray, toleran
         else:
             reason = _mismatch(duplicates.prototype, piece, local, tolerance)
             if reason:
-                log.warning("instance %d is not a copy of the prototype (%s): exported as a plain mesh",
-                            pose["instance_id"], reason)
+                log.warning(
+                    "instance %d is not a copy of the prototype (%s): exported as a plain mesh",
+                    pose["instance_id"],
+                    reason,
+                )
                 continue
         duplicates.copies.append(Copy(pose["instance_id"], pose["T"], piece.face_ids, piece.vertex_ids))
     return duplicates

@@ -28,10 +28,18 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux
 from ..scene.cubemap import cube_to_latlong, kg_from_stacked, kg_to_stacked, latlong_to_cube
 from ..scene.images import read_image, write_exr
 from ..scene.regions import face_texels
-from ..scene.types import Mesh, Maps, SceneError
+from ..scene.types import Maps, Mesh, SceneError
 from . import schema
 
-__all__ = ["latlong_size", "write_sky", "author_dome", "read_dome", "mean_radiance", "author_mesh_light", "light_radiance"]
+__all__ = [
+    "latlong_size",
+    "write_sky",
+    "author_dome",
+    "read_dome",
+    "mean_radiance",
+    "author_mesh_light",
+    "light_radiance",
+]
 
 LATLONG_PER_TEXEL = 32  # lat-long columns per cube texel row (8 per texel at the horizon)
 MIN_LATLONG_WIDTH = 512
@@ -87,7 +95,9 @@ def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str, 
     n = prim.GetAttribute(schema.CUBE_SIZE).Get() if prim.HasAttribute(schema.CUBE_SIZE) else None
     n = int(n or default_n)
     scale = _light_scale(UsdLux.LightAPI(prim)).astype(np.float32)
-    world = to_scene @ np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), np.float64).T
+    world = (
+        to_scene @ np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), np.float64).T
+    )
     u, _, vt = np.linalg.svd(world[:3, :3])
     rotation = u @ vt @ _pole_rotation(prim)
     turned = not np.allclose(rotation, np.eye(3), rtol=0, atol=1e-12)
@@ -104,8 +114,9 @@ def read_dome(prim: Usd.Prim, to_scene: np.ndarray, default_n: int, where: str, 
         return cube * scale
     image = read_image(file.resolvedPath)
     if image.shape[0] < 2 or image.shape[1] < 2:
-        raise SceneError(file.resolvedPath, f"{prim.GetPath()} inputs:texture:file",
-                         "a lat-long image of at least 2 x 2 pixels")
+        raise SceneError(
+            file.resolvedPath, f"{prim.GetPath()} inputs:texture:file", "a lat-long image of at least 2 x 2 pixels"
+        )
     image = np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
     return latlong_to_cube(image, n, rotation if turned else None) * scale
 
@@ -119,8 +130,11 @@ def _exact_cube(prim: Usd.Prim, texture: str) -> np.ndarray | None:
         return None
     stacked = read_image(cube.resolvedPath)
     if stacked.ndim != 3 or stacked.shape[0] != 6 * stacked.shape[1] or stacked.shape[2] != 3:
-        raise SceneError(cube.resolvedPath, f"{prim.GetPath()} {schema.CUBE}",
-                         f"a cube map of shape (6 N, N, 3), got {stacked.shape}")
+        raise SceneError(
+            cube.resolvedPath,
+            f"{prim.GetPath()} {schema.CUBE}",
+            f"a cube map of shape (6 N, N, 3), got {stacked.shape}",
+        )
     return kg_from_stacked(stacked.astype(np.float32))
 
 

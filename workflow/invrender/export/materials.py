@@ -35,8 +35,16 @@ from ..scene.types import Maps, SceneError
 from . import schema
 from .roughness import ka_from_roughness, roughness_from_ka
 
-__all__ = ["TEXTURES", "write_textures", "author_material", "Source", "MaterialSources", "read_material",
-           "evaluate", "texture_shape"]
+__all__ = [
+    "TEXTURES",
+    "write_textures",
+    "author_material",
+    "Source",
+    "MaterialSources",
+    "read_material",
+    "evaluate",
+    "texture_shape",
+]
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +61,14 @@ EXACT_ASSETS = {schema.KA: "ka", schema.KW: "kw"}  # invrender: attribute <- tex
 
 def write_textures(maps: Maps, directory: Path) -> dict[str, str]:
     """Write the material's textures; return {name: path relative to the layer}."""
-    images = {"kd": maps.kd, "ks": maps.ks, "ke": maps.ke, "roughness": roughness_from_ka(maps.ka),
-              "ka": maps.ka, "kw": maps.kw}
+    images = {
+        "kd": maps.kd,
+        "ks": maps.ks,
+        "ke": maps.ke,
+        "roughness": roughness_from_ka(maps.ka),
+        "ka": maps.ka,
+        "kw": maps.kw,
+    }
     files = {}
     for name, image in images.items():
         write_exr(directory / f"{name}.exr", image)
@@ -132,8 +146,14 @@ class MaterialSources:
         return (getattr(self, name),)
 
 
-FALLBACKS = {"diffuseColor": (0.18, 0.18, 0.18), "specularColor": (0.0, 0.0, 0.0), "roughness": (0.5,),
-             "emissiveColor": (0.0, 0.0, 0.0), "metallic": (0.0,), "ior": (1.5,)}  # UsdPreviewSurface's defaults
+FALLBACKS = {
+    "diffuseColor": (0.18, 0.18, 0.18),
+    "specularColor": (0.0, 0.0, 0.0),
+    "roughness": (0.5,),
+    "emissiveColor": (0.0, 0.0, 0.0),
+    "metallic": (0.0,),
+    "ior": (1.5,),
+}  # UsdPreviewSurface's defaults
 
 
 def _asset_path(value, where: str) -> str:
@@ -146,13 +166,19 @@ def _asset_path(value, where: str) -> str:
 def _texture_source(shader: UsdShade.Shader, output: str, where: str) -> Source:
     if shader.GetIdAttr().Get() != "UsdUVTexture":
         raise SceneError(where, f"{shader.GetPath()} info:id", "UsdUVTexture (the only texture node read)")
+
     def get(name, default):
         value = shader.GetInput(name).Get() if shader.GetInput(name) else None
         return default if value is None else value
 
     file = _asset_path(get("file", None), f"{where} {shader.GetPath()}")
-    return Source(file=file, channels=output, color_space=str(get("sourceColorSpace", "auto")),
-                  scale=tuple(get("scale", Gf.Vec4f(1, 1, 1, 1))), bias=tuple(get("bias", Gf.Vec4f(0, 0, 0, 0))))
+    return Source(
+        file=file,
+        channels=output,
+        color_space=str(get("sourceColorSpace", "auto")),
+        scale=tuple(get("scale", Gf.Vec4f(1, 1, 1, 1))),
+        bias=tuple(get("bias", Gf.Vec4f(0, 0, 0, 0))),
+    )
 
 
 def _input_source(surface: UsdShade.Shader, name: str, where: str) -> Source:
@@ -188,12 +214,19 @@ def read_material(material: UsdShade.Material | None, where: str, exact: bool = 
         if shader and shader.GetIdAttr().Get() == "UsdPreviewSurface":
             surface = shader
         elif shader:
-            log.warning("%s: surface shader %s is not a UsdPreviewSurface: its fallbacks are used", where,
-                        shader.GetIdAttr().Get())
+            log.warning(
+                "%s: surface shader %s is not a UsdPreviewSurface: its fallbacks are used",
+                where,
+                shader.GetIdAttr().Get(),
+            )
     if surface is None:
-        return MaterialSources(*(Source(constant=FALLBACKS[n]) for n in ("diffuseColor", "specularColor")),
-                               Source(constant=FALLBACKS["roughness"]), Source(constant=FALLBACKS["emissiveColor"]),
-                               Source(constant=(0.0,)), ka_from_roughness=True)
+        return MaterialSources(
+            *(Source(constant=FALLBACKS[n]) for n in ("diffuseColor", "specularColor")),
+            Source(constant=FALLBACKS["roughness"]),
+            Source(constant=FALLBACKS["emissiveColor"]),
+            Source(constant=(0.0,)),
+            ka_from_roughness=True,
+        )
     sources = {name: _input_source(surface, name, where) for name in STANDARD_INPUTS}
     prim = material.GetPrim()
     exact_ka = _exact_source(prim, schema.KA) if exact else None
@@ -206,10 +239,18 @@ def read_material(material: UsdShade.Material | None, where: str, exact: bool = 
     ior = _input_source(surface, "ior", where).constant if not specular else None
     workflow = {"metallic": metallic, "ior": float(ior[0]) if ior else 1.5}
     if exact_ka is not None and untouched:
-        return MaterialSources(sources["diffuseColor"], sources["specularColor"], exact_ka, sources["emissiveColor"],
-                               kw, **workflow)
-    return MaterialSources(sources["diffuseColor"], sources["specularColor"], sources["roughness"],
-                           sources["emissiveColor"], kw, ka_from_roughness=True, **workflow)
+        return MaterialSources(
+            sources["diffuseColor"], sources["specularColor"], exact_ka, sources["emissiveColor"], kw, **workflow
+        )
+    return MaterialSources(
+        sources["diffuseColor"],
+        sources["specularColor"],
+        sources["roughness"],
+        sources["emissiveColor"],
+        kw,
+        ka_from_roughness=True,
+        **workflow,
+    )
 
 
 def _read_texture(path: str, color_space: str) -> np.ndarray:
@@ -285,5 +326,11 @@ def evaluate_maps(sources: MaterialSources, shape: tuple[int, int]) -> dict[str,
         kd = kd * (1.0 - metallic)
     ka = evaluate(sources.ka, shape, 1)[..., 0]
     ka = ka_from_roughness(ka) if sources.ka_from_roughness else ka
-    maps = {"kd": kd, "ks": ks, "ka": ka, "ke": evaluate(sources.ke, shape, 3), "kw": evaluate(sources.kw, shape, 1)[..., 0]}
+    maps = {
+        "kd": kd,
+        "ks": ks,
+        "ka": ka,
+        "ke": evaluate(sources.ke, shape, 3),
+        "kw": evaluate(sources.kw, shape, 1)[..., 0],
+    }
     return {name: np.ascontiguousarray(values, np.float32) for name, values in maps.items()}

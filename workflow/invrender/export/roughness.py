@@ -90,8 +90,13 @@ def mapping_error(ka: float, theta_o: float) -> dict:
     integral |f_ours - f_theirs| cos / integral f_ours cos, at one view angle."""
     ours, theirs, weight = lobes(ka, theta_o)
     albedo_ours, albedo_theirs = float(ours @ weight), float(theirs @ weight)
-    return {"ka": ka, "theta_o_deg": float(np.degrees(theta_o)), "albedo_ours": albedo_ours,
-            "albedo_usd": albedo_theirs, "lobe_l1": float(np.abs(ours - theirs) @ weight / albedo_ours)}
+    return {
+        "ka": ka,
+        "theta_o_deg": float(np.degrees(theta_o)),
+        "albedo_ours": albedo_ours,
+        "albedo_usd": albedo_theirs,
+        "lobe_l1": float(np.abs(ours - theirs) @ weight / albedo_ours),
+    }
 
 
 KA_TABLE = (0.001, 0.01, 0.02, 0.05, 0.1, 0.3, 1.0)
@@ -104,8 +109,10 @@ def main() -> None:
     for ka in KA_TABLE:
         for angle in ANGLES_DEG:
             e = mapping_error(ka, np.radians(angle))
-            print(f"| {ka:g} | {float(roughness_from_ka(ka)):.3f} | {angle:.0f} deg | {e['albedo_ours']:.3f} "
-                  f"| {e['albedo_usd']:.3f} | {e['lobe_l1']:.2f} |")
+            print(
+                f"| {ka:g} | {float(roughness_from_ka(ka)):.3f} | {angle:.0f} deg | {e['albedo_ours']:.3f} "
+                f"| {e['albedo_usd']:.3f} | {e['lobe_l1']:.2f} |"
+            )
 
 
 if __name__ == "__main__":

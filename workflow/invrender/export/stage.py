@@ -32,7 +32,6 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdRender, UsdShade
 
 from ..scene.atomic import atomic_dir
 from ..scene.format import load_scene, read_scene_json
-from ..scene.images import write_exr
 from ..scene.poses import read_poses, validate_poses
 from ..scene.regions import classify_faces
 from ..scene.types import Maps, Scene, SceneError, SceneObject
@@ -103,8 +102,14 @@ def plan_parts(scene: Scene, names: dict[int, str], instanced: np.ndarray) -> li
         for group in range(groups.max() + 1):
             light_faces = faces[groups == group]
             number = sum(part.role == "light" for part in parts)
-            parts.append(Part(_prim_name(f"light_{number}", taken), "light", piece_of(mesh, light_faces, instance),
-                              radiance=mean_radiance(mesh, scene.maps, light_faces)))
+            parts.append(
+                Part(
+                    _prim_name(f"light_{number}", taken),
+                    "light",
+                    piece_of(mesh, light_faces, instance),
+                    radiance=mean_radiance(mesh, scene.maps, light_faces),
+                )
+            )
     return parts
 
 
@@ -129,8 +134,14 @@ def _instance_matrix(T: np.ndarray) -> Gf.Matrix4d:
     return Gf.Matrix4d(np.asarray(T, np.float64).T.tolist())  # USD multiplies row vectors
 
 
-def write_stage(path: Path, scene: Scene, parts: list[Part], duplicates: Duplicates | None, names: dict[int, str],
-                files: dict[str, str]) -> Usd.Stage:
+def write_stage(
+    path: Path,
+    scene: Scene,
+    parts: list[Part],
+    duplicates: Duplicates | None,
+    names: dict[int, str],
+    files: dict[str, str],
+) -> Usd.Stage:
     """Author the whole stage (module docstring) at `path`; textures are already in `files`."""
     stage = _new_stage(path)
     material = author_material(stage, f"{ROOT}/Looks/atlas", files)
@@ -155,8 +166,17 @@ def write_stage(path: Path, scene: Scene, parts: list[Part], duplicates: Duplica
             prim.GetReferences().AddInternalReference(prototype)
             prim.SetInstanceable(True)
             _role(prim, "instance")
-            write_indices(prim, MeshPiece(duplicates.prototype.positions, duplicates.prototype.uvs,
-                                          duplicates.prototype.faces, copy.face_ids, copy.vertex_ids, copy.instance_id))
+            write_indices(
+                prim,
+                MeshPiece(
+                    duplicates.prototype.positions,
+                    duplicates.prototype.uvs,
+                    duplicates.prototype.faces,
+                    copy.face_ids,
+                    copy.vertex_ids,
+                    copy.instance_id,
+                ),
+            )
 
     _author_sky_and_cameras(stage, scene, files)
     return stage
@@ -201,7 +221,9 @@ def _author_sky_and_cameras(stage: Usd.Stage, scene: Scene, files: dict) -> None
             author_camera(stage, camera_path, camera, _clipping(scene, camera))
             products.append(author_render_product(stage, f"/Render/Products/{name}", camera_path, camera).GetPath())
         settings.CreateProductsRel().SetTargets(products)
-        settings.CreateCameraRel().SetTargets(UsdRender.Product(stage.GetPrimAtPath(products[0])).GetCameraRel().GetTargets())
+        settings.CreateCameraRel().SetTargets(
+            UsdRender.Product(stage.GetPrimAtPath(products[0])).GetCameraRel().GetTargets()
+        )
         stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
 
 
@@ -224,8 +246,9 @@ def _set_material(stage: Usd.Stage, path: str, files: dict[str, str], name: str)
     return material
 
 
-def write_objects_stage(path: Path, scene: Scene, files: dict[str, dict[str, str]],
-                        sky: dict) -> tuple[Usd.Stage, list[Part]]:
+def write_objects_stage(
+    path: Path, scene: Scene, files: dict[str, dict[str, str]], sky: dict
+) -> tuple[Usd.Stage, list[Part]]:
     """Author a v2 scene (docs/export.md, "Scenes with objects"): one material per material set
     (`files[set]` its textures), one Xform per object with its transform, its mesh in its own
     frame below it split into surfaces, windows and lights as a v1 scene's is; objects sharing a
@@ -238,8 +261,11 @@ def write_objects_stage(path: Path, scene: Scene, files: dict[str, dict[str, str
     plain = {obj.material for members in groups.values() if len(members) == 1 for obj in members}
     instanced = {obj.material for members in groups.values() if len(members) > 1 for obj in members} - plain
     taken = set()  # /Scene/Looks: every set but those only instances use (their prototypes hold them)
-    looks = {name: _set_material(stage, f"{ROOT}/Looks/{_prim_name(name, taken)}", files[name], name)
-             for name in atlases if name not in instanced}
+    looks = {
+        name: _set_material(stage, f"{ROOT}/Looks/{_prim_name(name, taken)}", files[name], name)
+        for name in atlases
+        if name not in instanced
+    }
     taken, authored = set(), []
     for members in groups.values():
         first = members[0]
@@ -256,8 +282,9 @@ def write_objects_stage(path: Path, scene: Scene, files: dict[str, dict[str, str
         prototype = f"{ROOT}/Prototypes/{_prim_name(first.name, set())}"
         UsdGeom.Xform.Define(stage, prototype)
         UsdGeom.Scope.Define(stage, f"{prototype}/Looks")
-        material = _set_material(stage, f"{prototype}/Looks/{_prim_name(first.material, set())}", files[first.material],
-                                 first.material)
+        material = _set_material(
+            stage, f"{prototype}/Looks/{_prim_name(first.material, set())}", files[first.material], first.material
+        )
         for part in parts:
             _author_part(stage, f"{prototype}/{part.name}", part, material)
         for obj in members:
@@ -291,8 +318,9 @@ def export_usd(scene_dir, out_dir, usdc: bool = False, poses=None, instancing: b
     pose_list = _poses_of(poses, metadata, scene_dir) if instancing else []
     diagonal = float(np.linalg.norm(np.ptp(scene.mesh.positions, axis=0)))
     regions = classify_faces(scene)
-    duplicates = find_duplicates(scene.mesh, pose_list, ~(regions["hole"] | regions["emitter"]),
-                                 tolerance=1e-5 * max(1.0, diagonal))
+    duplicates = find_duplicates(
+        scene.mesh, pose_list, ~(regions["hole"] | regions["emitter"]), tolerance=1e-5 * max(1.0, diagonal)
+    )
     instanced = duplicates.face_mask(len(scene.mesh.faces)) if duplicates else np.zeros(len(scene.mesh.faces), bool)
     parts = plan_parts(scene, names, instanced)
 
@@ -317,7 +345,9 @@ def _export_objects(scene: Scene, scene_dir: Path, out_dir: Path, usdc: bool) ->
         files = {}
         for name, atlas in scene.packing.unpack_atlas(scene.maps).items():
             written = write_textures(atlas, tmp / TEXTURES / name)
-            files[name] = {key: f"./{TEXTURES}/{name}/{Path(rel).name}" for key, rel in written.items()}  # its own folder
+            files[name] = {
+                key: f"./{TEXTURES}/{name}/{Path(rel).name}" for key, rel in written.items()
+            }  # its own folder
         stage, parts = write_objects_stage(tmp / "scene.usda", scene, files, _write_sky(scene, tmp))
         return stage, lambda layers: _objects_summary(scene, parts, layers)
 
@@ -361,13 +391,25 @@ def _summary(scene: Scene, parts: list[Part], duplicates: Duplicates | None, lay
         "version": schema.VERSION,
         "layers": layers,
         "validation": "no errors (UsdValidation: the validators usdchecker runs)",
-        "prims": {"surfaces": count("surface"), "windows": count("window"), "lights": count("light"),
-                  "instances": len(duplicates.copies) if duplicates else 0, "cameras": len(scene.cameras),
-                  "dome": bool(np.any(scene.maps.kg > 0))},
+        "prims": {
+            "surfaces": count("surface"),
+            "windows": count("window"),
+            "lights": count("light"),
+            "instances": len(duplicates.copies) if duplicates else 0,
+            "cameras": len(scene.cameras),
+            "dome": bool(np.any(scene.maps.kg > 0)),
+        },
         "faces": int(len(scene.mesh.faces)),
         "instanced_faces": int(sum(len(c.face_ids) for c in duplicates.copies)) if duplicates else 0,
-        "lights": [{"name": part.name, "faces": int(len(part.piece.faces)),
-                    "mean_radiance": [round(float(v), 6) for v in part.radiance]} for part in parts if part.role == "light"],
+        "lights": [
+            {
+                "name": part.name,
+                "faces": int(len(part.piece.faces)),
+                "mean_radiance": [round(float(v), 6) for v in part.radiance],
+            }
+            for part in parts
+            if part.role == "light"
+        ],
     }
 
 
@@ -381,10 +423,16 @@ def _objects_summary(scene: Scene, parts: list[Part], layers: list[str]) -> dict
         "version": schema.VERSION,
         "layers": layers,
         "validation": "no errors (UsdValidation: the validators usdchecker runs)",
-        "prims": {"objects": len(scene.objects), "prototypes": sum(len(v) > 1 for v in meshes.values()),
-                  "instances": sum(len(v) for v in meshes.values() if len(v) > 1), "surfaces": count("surface"),
-                  "windows": count("window"), "lights": count("light"), "cameras": len(scene.cameras),
-                  "dome": bool(np.any(scene.maps.kg > 0))},
+        "prims": {
+            "objects": len(scene.objects),
+            "prototypes": sum(len(v) > 1 for v in meshes.values()),
+            "instances": sum(len(v) for v in meshes.values() if len(v) > 1),
+            "surfaces": count("surface"),
+            "windows": count("window"),
+            "lights": count("light"),
+            "cameras": len(scene.cameras),
+            "dome": bool(np.any(scene.maps.kg > 0)),
+        },
         "faces": int(len(scene.mesh.faces)),
         "material_sets": sorted(scene.packing.rects),
     }

@@ -23,8 +23,13 @@ def is_features_json(path: Path) -> bool:
     return isinstance(document, dict) and "evidence" in document
 
 
-def run(scene_dir, out_path, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
-        device: str | None = None):
+def run(
+    scene_dir,
+    out_path,
+    settings: AnalysisSettings = AnalysisSettings(),
+    overrides: dict | None = None,
+    device: str | None = None,
+):
     """Analyse a scene directory and write features.json (features + the evidence behind them)."""
     check_output(out_path, "features", is_features_json)  # before the work, not after it
     check_settings(settings)
@@ -54,7 +59,9 @@ def check_settings(settings: AnalysisSettings) -> None:
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 64:
             raise SceneError(where, name, f"an integer in 0..64, got {value!r}")
     if settings.min_bounces > settings.max_bounces:
-        raise SceneError(where, "min_bounces", f"at most max_bounces ({settings.max_bounces}), got {settings.min_bounces}")
+        raise SceneError(
+            where, "min_bounces", f"at most max_bounces ({settings.max_bounces}), got {settings.min_bounces}"
+        )
     if not 0 < settings.bounce_fraction < 1:
         raise SceneError(where, "bounce_fraction", f"a fraction in (0, 1), got {settings.bounce_fraction!r}")
     if not settings.specular_threshold >= 0 or settings.specular_threshold == float("inf"):

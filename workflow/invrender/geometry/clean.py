@@ -96,16 +96,24 @@ def load_geometry(path) -> pymeshlab.MeshSet:
     bad = ~np.isfinite(positions).all(axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise SceneError(path, "vertex positions", f"finite numbers; vertex {i} is {positions[i].tolist()} "
-                         f"({int(bad.sum())} of {len(positions)} vertices non-finite)")
+        raise SceneError(
+            path,
+            "vertex positions",
+            f"finite numbers; vertex {i} is {positions[i].tolist()} "
+            f"({int(bad.sum())} of {len(positions)} vertices non-finite)",
+        )
 
     ms = pymeshlab.MeshSet()
     if face_count > 0:
         # pymeshlab's own loaders crash (signal 11) on faults such as an OBJ face index past the
         # vertex count: it only ever sees arrays our readers have checked, never the file.
         mesh = read_triangles(path)
-        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(mesh.positions, np.float64),
-                                   face_matrix=np.asarray(mesh.faces, np.int32)), "mesh")
+        ms.add_mesh(
+            pymeshlab.Mesh(
+                vertex_matrix=np.asarray(mesh.positions, np.float64), face_matrix=np.asarray(mesh.faces, np.int32)
+            ),
+            "mesh",
+        )
         return ms
 
     if normals is None:
@@ -115,8 +123,12 @@ def load_geometry(path) -> pymeshlab.MeshSet:
     bad = ~np.isfinite(length) | (length < 1e-6)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise SceneError(path, "vertex normals", f"finite non-zero normals on every point; point {i} has "
-                         f"{normals[i].tolist()} ({int(bad.sum())} of {len(normals)} points)")
+        raise SceneError(
+            path,
+            "vertex normals",
+            f"finite non-zero normals on every point; point {i} has "
+            f"{normals[i].tolist()} ({int(bad.sum())} of {len(normals)} points)",
+        )
     cloud = pymeshlab.Mesh(vertex_matrix=positions, v_normals_matrix=normals / length[:, None])
     ms.add_mesh(cloud, "point cloud")
     return ms
@@ -165,11 +177,23 @@ def clean_mesh(
     # fins, measured), not the surface they hang on.
     _step(ms, report, "non_manifold_edges", "meshing_repair_non_manifold_edges", method="Remove Faces")
     if min_island_fraction > 0:
-        _step(ms, report, "small_islands_by_size", "meshing_remove_connected_component_by_diameter",
-              mincomponentdiag=pymeshlab.PercentageValue(100.0 * min_island_fraction), removeunref=False)
+        _step(
+            ms,
+            report,
+            "small_islands_by_size",
+            "meshing_remove_connected_component_by_diameter",
+            mincomponentdiag=pymeshlab.PercentageValue(100.0 * min_island_fraction),
+            removeunref=False,
+        )
     if min_island_faces > 0:
-        _step(ms, report, "small_islands_by_faces", "meshing_remove_connected_component_by_face_number",
-              mincomponentsize=int(min_island_faces), removeunref=False)
+        _step(
+            ms,
+            report,
+            "small_islands_by_faces",
+            "meshing_remove_connected_component_by_face_number",
+            mincomponentsize=int(min_island_faces),
+            removeunref=False,
+        )
     _step(ms, report, "unreferenced_vertices", "meshing_remove_unreferenced_vertices")
     removed = {k: v for k, v in report.items() if v["vertices"] or v["faces"]}
     vertices, faces = _counts(ms)
@@ -196,7 +220,7 @@ def mean_point_spacing(points, samples: int = 512, seed: int = 0, chunk: int = 8
     best = np.full(len(query), np.inf)
     q2 = (query**2).sum(1)
     for start in range(0, len(points), chunk):
-        block = points[start:start + chunk]
+        block = points[start : start + chunk]
         d2 = q2[:, None] + (block**2).sum(1)[None, :] - 2.0 * query @ block.T
         own = (pick >= start) & (pick < start + len(block))  # a query point is not its own neighbour
         d2[np.flatnonzero(own), pick[own] - start] = np.inf
@@ -239,8 +263,9 @@ def reconstruct(
     points = cloud.vertex_matrix()
     spacing = mean_point_spacing(points)
     threads = int(threads or _default_threads())
-    log.info("screened Poisson: %d points, mean spacing %.4g m, depth %d, %d threads",
-             len(points), spacing, depth, threads)
+    log.info(
+        "screened Poisson: %d points, mean spacing %.4g m, depth %d, %d threads", len(points), spacing, depth, threads
+    )
     ms.generate_surface_reconstruction_screened_poisson(depth=int(depth), preclean=True, threads=threads)
     surface_id = ms.current_mesh_id()
     poisson_faces = ms.current_mesh().face_number()
@@ -249,8 +274,11 @@ def reconstruct(
     # pymeshlab measures to its vertices), into the vertex quality; then cut the far vertices.
     threshold = trim_spacings * spacing
     ms.compute_scalar_by_distance_from_another_mesh_per_vertex(
-        measuremesh=surface_id, refmesh=cloud_id, signeddist=False,
-        maxdist=pymeshlab.PureValue(max(10.0 * threshold, ms.current_mesh().bounding_box().diagonal())))
+        measuremesh=surface_id,
+        refmesh=cloud_id,
+        signeddist=False,
+        maxdist=pymeshlab.PureValue(max(10.0 * threshold, ms.current_mesh().bounding_box().diagonal())),
+    )
     distance = ms.current_mesh().vertex_scalar_array()
     report: dict = {}
     ms.compute_selection_by_condition_per_vertex(condselect=f"(q > {threshold:.12f})")
@@ -259,10 +287,17 @@ def reconstruct(
     ms.delete_current_mesh()
     ms.set_current_mesh(surface_id)
     trimmed = report["trimmed_far_from_points"]["faces"]
-    log.info("Poisson surface: %d faces; trimmed %d (%.1f%%) with a vertex farther than %.4g m "
-             "(%g spacings) from the points; vertex-to-point distance median %.4g m, max %.4g m",
-             poisson_faces, trimmed, 100.0 * trimmed / max(poisson_faces, 1), threshold, trim_spacings,
-             float(np.median(distance)), float(distance.max()))
+    log.info(
+        "Poisson surface: %d faces; trimmed %d (%.1f%%) with a vertex farther than %.4g m "
+        "(%g spacings) from the points; vertex-to-point distance median %.4g m, max %.4g m",
+        poisson_faces,
+        trimmed,
+        100.0 * trimmed / max(poisson_faces, 1),
+        threshold,
+        trim_spacings,
+        float(np.median(distance)),
+        float(distance.max()),
+    )
     report.update(clean_mesh(ms, min_island_fraction, min_island_faces, log=log))
     return {
         "points": int(len(points)),
@@ -296,8 +331,13 @@ def simplify(ms: pymeshlab.MeshSet, target_faces: int = DEFAULT_TARGET_FACES, lo
     constrained = dict(preserveboundary=True, boundaryweight=1.0, preservenormal=True, preservetopology=True)
     for constraints in (constrained, {}):
         ms.meshing_decimation_quadric_edge_collapse(
-            targetfacenum=target, qualitythr=0.3, optimalplacement=True, planarquadric=True,
-            autoclean=True, **constraints)
+            targetfacenum=target,
+            qualitythr=0.3,
+            optimalplacement=True,
+            planarquadric=True,
+            autoclean=True,
+            **constraints,
+        )
         report["passes"] += 1
         faces = ms.current_mesh().face_number()
         if faces <= target * (1 + SIMPLIFY_TOLERANCE):
@@ -307,6 +347,7 @@ def simplify(ms: pymeshlab.MeshSet, target_faces: int = DEFAULT_TARGET_FACES, lo
     report["faces_after"] = faces
     log.info("simplify: %d -> %d faces (target %d)", before, faces, target)
     if abs(faces - target) > SIMPLIFY_TOLERANCE * target:
-        log.warning("simplify: %d faces is more than %.0f%% from the target %d",
-                    faces, 100 * SIMPLIFY_TOLERANCE, target)
+        log.warning(
+            "simplify: %d faces is more than %.0f%% from the target %d", faces, 100 * SIMPLIFY_TOLERANCE, target
+        )
     return report

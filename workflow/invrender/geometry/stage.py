@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.mesh_io import write_ply
 from ..scene.types import Mesh, SceneError, require_positive
-from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from .clean import DEFAULT_TARGET_FACES, clean_mesh, input_kind, load_geometry, reconstruct, simplify
 
 __all__ = ["run", "texel_density", "REPORT_VERSION"]
@@ -72,7 +72,9 @@ def run(
     source, out_dir = Path(source), Path(out_dir)
     if texels_per_meter is not None:
         if not (np.isfinite(texels_per_meter) and texels_per_meter > 0):
-            raise SceneError("geometry --texels-per-meter", "texel density", f"a positive number, got {texels_per_meter}")
+            raise SceneError(
+                "geometry --texels-per-meter", "texel density", f"a positive number, got {texels_per_meter}"
+            )
         atlas_resolution = None
     else:
         require_positive("geometry --atlas-resolution", "atlas size", atlas_resolution, minimum=8)
@@ -93,8 +95,13 @@ def run(
         "input": {"vertices": int(loaded.vertex_number()), "faces": int(loaded.face_number())},
         "units": "meters, +Y up (as given)",
     }
-    log.info("geometry: %s is a %s with %d vertices and %d faces", source, kind.replace("_", " "),
-             loaded.vertex_number(), loaded.face_number())
+    log.info(
+        "geometry: %s is a %s with %d vertices and %d faces",
+        source,
+        kind.replace("_", " "),
+        loaded.vertex_number(),
+        loaded.face_number(),
+    )
 
     steps = ["reconstruct" if kind == "point_cloud" else "clean", "simplify", "unwrap", "rasterize", "write"]
     with tqdm(total=len(steps), desc="geometry", unit="step", disable=not progress, leave=False) as bar:
@@ -107,9 +114,15 @@ def run(
         t0 = time.perf_counter()
         bar.set_postfix_str(steps[0])
         if kind == "point_cloud":
-            recon = reconstruct(ms, depth=poisson_depth, trim_spacings=trim_spacings,
-                                min_island_fraction=min_island_fraction, min_island_faces=min_island_faces,
-                                threads=threads, log=log)
+            recon = reconstruct(
+                ms,
+                depth=poisson_depth,
+                trim_spacings=trim_spacings,
+                min_island_fraction=min_island_fraction,
+                min_island_faces=min_island_faces,
+                threads=threads,
+                log=log,
+            )
             report["cleaning"] = recon.pop("removed")
             report["reconstruction"] = recon
         else:
@@ -117,8 +130,9 @@ def run(
             report["reconstruction"] = None
         if ms.current_mesh().face_number() == 0:
             removed = {k: v["faces"] for k, v in report["cleaning"].items() if v["faces"]}
-            raise SceneError(source, "faces", f"a surface with area that survives cleaning; every face was "
-                             f"removed ({removed})")
+            raise SceneError(
+                source, "faces", f"a surface with area that survives cleaning; every face was removed ({removed})"
+            )
         t0 = done(steps[0], t0)
 
         bar.set_postfix_str("simplify")
@@ -129,13 +143,13 @@ def run(
         positions = np.asarray(mesh.vertex_matrix(), np.float64)
         faces = np.asarray(mesh.face_matrix(), np.int64)
         bar.set_postfix_str("unwrap")
-        uv = unwrap(positions, faces, texels_per_meter=texels_per_meter, resolution=atlas_resolution,
-                    padding=padding)
+        uv = unwrap(positions, faces, texels_per_meter=texels_per_meter, resolution=atlas_resolution, padding=padding)
         t0 = done("unwrap", t0)
 
         bar.set_postfix_str("rasterize")
-        out_mesh = Mesh(positions=uv.positions, faces=uv.faces, uvs=uv.uvs,
-                        instance_ids=np.zeros(len(uv.faces), np.int32))
+        out_mesh = Mesh(
+            positions=uv.positions, faces=uv.faces, uvs=uv.uvs, instance_ids=np.zeros(len(uv.faces), np.int32)
+        )
         texels = rasterize_atlas(out_mesh, uv.height, uv.width)
         t0 = done("rasterize", t0)
 
@@ -154,17 +168,26 @@ def run(
             "width": int(uv.width),
             "height": int(uv.height),
             "padding": int(padding),
-            "requested": ({"texels_per_meter": float(texels_per_meter)} if texels_per_meter is not None
-                          else {"resolution": int(atlas_resolution)}),
+            "requested": (
+                {"texels_per_meter": float(texels_per_meter)}
+                if texels_per_meter is not None
+                else {"resolution": int(atlas_resolution)}
+            ),
             "covered_texels": int(texels.mask.sum()),
             "utilisation": utilisation,
             "texel_density_per_m": median_density,
             "texel_density_per_m_p5_p95": np.nanpercentile(density, [5, 95]).tolist(),
             "texel_size_m": 1.0 / median_density,
         }
-        log.info("atlas %dx%d: utilisation %.1f%% (covered texels / all texels), texel density %.1f "
-                 "texels/m (median over triangles; texel size %.4g m)", uv.width, uv.height,
-                 100 * utilisation, median_density, 1.0 / median_density)
+        log.info(
+            "atlas %dx%d: utilisation %.1f%% (covered texels / all texels), texel density %.1f "
+            "texels/m (median over triangles; texel size %.4g m)",
+            uv.width,
+            uv.height,
+            100 * utilisation,
+            median_density,
+            1.0 / median_density,
+        )
 
         bar.set_postfix_str("write")
         with atomic_dir(out_dir, kind="geometry") as tmp:
@@ -174,6 +197,12 @@ def run(
             t0 = done("write", t0)
             report["timings_s"] = timings | {"total": round(time.perf_counter() - started, 3)}
             (tmp / "geometry.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
-    log.info("geometry: wrote %s (%d faces, %dx%d atlas) in %.1f s", out_dir, len(uv.faces), uv.width,
-             uv.height, report["timings_s"]["total"])
+    log.info(
+        "geometry: wrote %s (%d faces, %dx%d atlas) in %.1f s",
+        out_dir,
+        len(uv.faces),
+        uv.width,
+        uv.height,
+        report["timings_s"]["total"],
+    )
     return report

@@ -50,9 +50,18 @@ def signed_preview(gradient: np.ndarray) -> np.ndarray:
     return np.stack([np.maximum(g, 0), np.zeros_like(g), np.maximum(-g, 0)], -1)
 
 
-def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp: int = 16,
-                    seed: int = 0, iteration: int = 0, device: str | None = None,
-                    accumulation: str = "fixed") -> dict:
+def run(
+    geometry_dir,
+    cameras_path,
+    images_dir,
+    out_dir,
+    batch: int = 65536,
+    spp: int = 16,
+    seed: int = 0,
+    iteration: int = 0,
+    device: str | None = None,
+    accumulation: str = "fixed",
+) -> dict:
     check_output(out_dir, "gradients")  # before the work, not after it
     spp = require_positive("gradients --spp", "samples per pixel", spp)
     batch = require_positive("gradients --batch", "rays per batch", batch)
@@ -68,9 +77,15 @@ def run(geometry_dir, cameras_path, images_dir, out_dir, batch: int = 65536, spp
     norm = np.linalg.norm(residual, axis=1, keepdims=True)
     adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
     grads = backward(renderer, scene.cameras, requests, adjoint, spp, backward_seed(seed), accumulation)
-    report = {"loss": float(norm.sum()), "rays": len(requests), "spp": spp, "seed": seed, "iteration": iteration,
-              "accumulation": accumulation,
-              "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER}}
+    report = {
+        "loss": float(norm.sum()),
+        "rays": len(requests),
+        "spp": spp,
+        "seed": seed,
+        "iteration": iteration,
+        "accumulation": accumulation,
+        "norms": {name: float(np.linalg.norm(grads[name])) for name in MAP_ORDER},
+    }
     log.info("loss %.6g over %d rays; gradient norms %s", report["loss"], len(requests), report["norms"])
     with atomic_dir(Path(out_dir), kind="gradients") as tmp:
         tmp = Path(tmp)

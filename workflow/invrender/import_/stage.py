@@ -19,8 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..scene.atomic import check_output
 from ..scene.atlas import bake, rasterize_atlas, triangle_areas, unwrap
+from ..scene.atomic import check_output
 from ..scene.cameras import read_cameras
 from ..scene.cubemap import latlong_to_cube
 from ..scene.format import write_scene
@@ -40,8 +40,16 @@ CONSTANT_ATLAS = (1, 1)  # a material without textures is one texel
 OVERSAMPLE = 4.0
 
 
-def run(source, out_dir, cameras=None, environment=None, cube_size: int = 64, emission_sides: str = "one",
-        windows: tuple[str, ...] = (), max_atlas: int = 2048) -> dict:
+def run(
+    source,
+    out_dir,
+    cameras=None,
+    environment=None,
+    cube_size: int = 64,
+    emission_sides: str = "one",
+    windows: tuple[str, ...] = (),
+    max_atlas: int = 2048,
+) -> dict:
     """Import ``source`` (a folder of .obj files, or one .obj) into the scene directory ``out_dir``.
 
     ``cameras``: a COLMAP model or transforms.json (default: ``source/sparse`` or
@@ -65,8 +73,14 @@ def run(source, out_dir, cameras=None, environment=None, cube_size: int = 64, em
     kg = environment_cube(environment, cube_size)
     scene = pack_scene(objects, materials, kg, find_cameras(source, cameras))
     write_scene(Path(out_dir), scene)
-    summary = {"objects": len(objects), "material_sets": len(materials), "faces": int(scene.mesh.triangle_count),
-               "atlas": list(scene.maps.atlas_shape), "cameras": len(scene.cameras), "cube_size": int(kg.shape[1])}
+    summary = {
+        "objects": len(objects),
+        "material_sets": len(materials),
+        "faces": int(scene.mesh.triangle_count),
+        "atlas": list(scene.maps.atlas_shape),
+        "cameras": len(scene.cameras),
+        "cube_size": int(kg.shape[1]),
+    }
     log.info("imported %s -> %s: %s", source, out_dir, summary)
     return summary
 
@@ -98,7 +112,9 @@ def import_obj(obj_path: Path, emission_sides: str, windows: set, max_atlas: int
     for material_name, mesh in parts:
         if material_name and material_name not in library:
             raise SceneError(obj_path, f"usemtl {material_name}", f"a material of its mtllib ({', '.join(mtllibs)})")
-        material = library.get(material_name, MtlMaterial(material_name or "default", {"kd": np.full(3, 0.8, np.float32)}))
+        material = library.get(
+            material_name, MtlMaterial(material_name or "default", {"kd": np.full(3, 0.8, np.float32)})
+        )
         object_name = obj_path.stem if len(parts) == 1 else f"{obj_path.stem}.{material_name or 'default'}"
         mesh, key, atlas = material_set(object_name, mesh, material, material.name in windows, max_atlas)
         yield SceneObject(object_name, mesh, key, emission_sides=emission_sides), key, atlas
@@ -112,8 +128,11 @@ def material_set(object_name: str, mesh: Mesh, material: MtlMaterial, window: bo
     if not material.maps:
         return with_uvs(mesh), material.name, constant_atlas(material)
     if mesh.uvs is None:
-        raise SceneError(material.maps[next(iter(material.maps))], f"{object_name} vt",
-                         "texture coordinates on an object whose material has textures")
+        raise SceneError(
+            material.maps[next(iter(material.maps))],
+            f"{object_name} vt",
+            "texture coordinates on an object whose material has textures",
+        )
     if np.all((mesh.uvs >= 0) & (mesh.uvs <= 1)):
         return mesh, material.name, texture_atlas(material, max_atlas)
     return baked_atlas(object_name, mesh, material, max_atlas)
@@ -125,8 +144,14 @@ def with_uvs(mesh: Mesh) -> Mesh:
 
 
 def constant_atlas(material: MtlMaterial) -> Atlas:
-    return Atlas.uniform(CONSTANT_ATLAS, kd=material.constant("kd"), ks=material.constant("ks"),
-                         ka=material.constant("ka"), ke=material.constant("ke"), kw=0.0)
+    return Atlas.uniform(
+        CONSTANT_ATLAS,
+        kd=material.constant("kd"),
+        ks=material.constant("ks"),
+        ka=material.constant("ka"),
+        ke=material.constant("ke"),
+        kw=0.0,
+    )
 
 
 def texture_atlas(material: MtlMaterial, max_atlas: int) -> Atlas:
@@ -144,8 +169,9 @@ def texture_atlas(material: MtlMaterial, max_atlas: int) -> Atlas:
         else:
             maps[key] = image if image.shape[:2] == (h, w) else cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
     ka = np.full((h, w), material.constant("ka"), np.float32)
-    return Atlas(kd=clip_albedo(maps["kd"]), ks=clip_albedo(maps["ks"]), ka=ka, ke=maps["ke"],
-                 kw=np.zeros((h, w), np.float32))
+    return Atlas(
+        kd=clip_albedo(maps["kd"]), ks=clip_albedo(maps["ks"]), ka=ka, ke=maps["ke"], kw=np.zeros((h, w), np.float32)
+    )
 
 
 def clip_albedo(rgb: np.ndarray) -> np.ndarray:
@@ -179,9 +205,13 @@ def baked_atlas(object_name: str, mesh: Mesh, material: MtlMaterial, max_atlas: 
         return bake(texels, shade, 3, dilation=2)
 
     h, w = texels.shape
-    atlas = Atlas(kd=clip_albedo(sample("kd")), ks=clip_albedo(sample("ks")),
-                  ka=np.full((h, w), material.constant("ka"), np.float32), ke=sample("ke"),
-                  kw=np.zeros((h, w), np.float32))
+    atlas = Atlas(
+        kd=clip_albedo(sample("kd")),
+        ks=clip_albedo(sample("ks")),
+        ka=np.full((h, w), material.constant("ka"), np.float32),
+        ke=sample("ke"),
+        kw=np.zeros((h, w), np.float32),
+    )
     log.info("%s: UVs tile outside [0, 1]: baked %s into an atlas of %d x %d", object_name, material.name, w, h)
     return unwrapped, f"{object_name}-{material.name}", atlas
 
@@ -195,4 +225,3 @@ def texture_density(mesh: Mesh, material: MtlMaterial) -> float:
     e1, e2 = corners_uv[:, 1] - corners_uv[:, 0], corners_uv[:, 2] - corners_uv[:, 0]
     uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     return OVERSAMPLE * float(np.sqrt(texels * uv_area / triangle_areas(mesh.positions, mesh.faces).sum()))
-

@@ -25,14 +25,37 @@ from .envmap import cube_to_latlong, default_envmap_size, envmap_directions
 from .llvm import llvm_available
 from .mesh import mesh_object
 from .milo import KA_MIN, milo_bsdf
-from .scene import (lambertian_faces, path_integrator, render_aovs, render_mitsuba, scene_to_mitsuba,
-                    scene_to_mitsuba_diffuse)
+from .scene import (
+    lambertian_faces,
+    path_integrator,
+    render_aovs,
+    render_mitsuba,
+    scene_to_mitsuba,
+    scene_to_mitsuba_diffuse,
+)
 from .textures import bitmap_texture
 from .variant import DEFAULT_VARIANT, set_variant
 
 __all__ = [
-    "DEFAULT_VARIANT", "KA_MIN", "bitmap_texture", "camera_to_world", "cube_to_latlong", "default_envmap_size",
-    "diffuse_bsdf", "envmap_directions", "kd_parameter", "lambertian_faces", "llvm_available", "mesh_object",
-    "milo_bsdf", "path_integrator", "prb_integrator", "render_aovs", "render_mitsuba", "scene_to_mitsuba",
-    "scene_to_mitsuba_diffuse", "sensor_dict", "set_variant",
+    "DEFAULT_VARIANT",
+    "KA_MIN",
+    "bitmap_texture",
+    "camera_to_world",
+    "cube_to_latlong",
+    "default_envmap_size",
+    "diffuse_bsdf",
+    "envmap_directions",
+    "kd_parameter",
+    "lambertian_faces",
+    "llvm_available",
+    "mesh_object",
+    "milo_bsdf",
+    "path_integrator",
+    "prb_integrator",
+    "render_aovs",
+    "render_mitsuba",
+    "scene_to_mitsuba",
+    "scene_to_mitsuba_diffuse",
+    "sensor_dict",
+    "set_variant",
 ]

@@ -35,8 +35,8 @@ from invrender.scene.regions import classify_faces
 from invrender.scene.types import Camera, Scene
 
 from .camera import sensor_dict
-from .envmap import cube_to_latlong
 from .diffuse import diffuse_bsdf
+from .envmap import cube_to_latlong
 from .mesh import mesh_object
 from .milo import milo_bsdf
 from .textures import bitmap_texture
@@ -98,8 +98,11 @@ def scene_to_mitsuba(
         )
 
     bsdf = mi.load_dict(bsdf or milo_bsdf(maps.kd, maps.ks, maps.ka))  # one instance shared by all meshes
-    out = {"type": "scene", "integrator": integrator or path_integrator(max_bounces),
-           "sensor": sensor_dict(camera, spp, seed)}
+    out = {
+        "type": "scene",
+        "integrator": integrator or path_integrator(max_bounces),
+        "sensor": sensor_dict(camera, spp, seed),
+    }
     kept = ~groups["hole"]
     kinds = (("surfaces", kept & ~groups["emitter"], False), ("emitters", kept & groups["emitter"], True))
     materials = [("", np.ones(len(mesh.faces), bool), bsdf)]
@@ -111,8 +114,9 @@ def scene_to_mitsuba(
             if not (mask & faces).any():
                 continue
             emitter = {"type": "area", "radiance": bitmap_texture(maps.ke)} if emits else None
-            out[name + suffix] = mesh_object(mesh.positions, mesh.faces[mask & faces], mesh.uvs, name + suffix,
-                                             bsdf=material, emitter=emitter)
+            out[name + suffix] = mesh_object(
+                mesh.positions, mesh.faces[mask & faces], mesh.uvs, name + suffix, bsdf=material, emitter=emitter
+            )
     if np.any(maps.kg > 0):
         out["environment"] = {"type": "envmap", "bitmap": mi.Bitmap(cube_to_latlong(maps.kg, envmap_size))}
     return out
@@ -132,8 +136,18 @@ def render_mitsuba(
 ) -> np.ndarray:
     """Render with Mitsuba: (H, W, 3) float32 radiance, each pixel box-integrated. `bsdf` and
     `lambertian_native` as in `scene_to_mitsuba`."""
-    scene_dict = scene_to_mitsuba(scene, camera, max_bounces, spp, variant, seed, window_as_hole, envmap_size,
-                                  bsdf=bsdf, lambertian_native=lambertian_native)
+    scene_dict = scene_to_mitsuba(
+        scene,
+        camera,
+        max_bounces,
+        spp,
+        variant,
+        seed,
+        window_as_hole,
+        envmap_size,
+        bsdf=bsdf,
+        lambertian_native=lambertian_native,
+    )
     loaded = mi.load_dict(scene_dict, parallel=False)
     image = mi.render(loaded, spp=int(spp), seed=int(seed))
     return np.array(image, dtype=np.float32)[..., :3]
@@ -167,14 +181,34 @@ def render_aovs(
     return {"depth": image[..., 0], "uv": image[..., 1:3], "hit": image[..., 3]}
 
 
-def scene_to_mitsuba_diffuse(scene: Scene, camera: Camera, max_bounces: int, spp: int,
-                             variant: str = DEFAULT_VARIANT, seed: int = 0, window_as_hole: bool = True,
-                             envmap_size=None, integrator: dict | None = None) -> dict:
+def scene_to_mitsuba_diffuse(
+    scene: Scene,
+    camera: Camera,
+    max_bounces: int,
+    spp: int,
+    variant: str = DEFAULT_VARIANT,
+    seed: int = 0,
+    window_as_hole: bool = True,
+    envmap_size=None,
+    integrator: dict | None = None,
+) -> dict:
     """As `scene_to_mitsuba`, for a scene with ks = 0 everywhere, with `diffuse_bsdf(kd)` (one
     instance shared by every mesh, so `mi.traverse` lists its kd once: `kd_parameter`) instead of
     the milo plugin. Emitters are one-sided in Mitsuba (see above): face them into the scene."""
     if np.any(scene.maps.ks > 0):
-        raise ValueError("scene_to_mitsuba_diffuse: maps.ks: expected 0 everywhere (a Lambertian scene), "
-                         f"got a maximum of {float(scene.maps.ks.max())}")
-    return scene_to_mitsuba(scene, camera, max_bounces, spp, variant, seed, window_as_hole, envmap_size, integrator,
-                            bsdf=diffuse_bsdf(scene.maps.kd))
+        raise ValueError(
+            "scene_to_mitsuba_diffuse: maps.ks: expected 0 everywhere (a Lambertian scene), "
+            f"got a maximum of {float(scene.maps.ks.max())}"
+        )
+    return scene_to_mitsuba(
+        scene,
+        camera,
+        max_bounces,
+        spp,
+        variant,
+        seed,
+        window_as_hole,
+        envmap_size,
+        integrator,
+        bsdf=diffuse_bsdf(scene.maps.kd),
+    )

@@ -23,10 +23,12 @@ def set_variant(variant: str = DEFAULT_VARIANT) -> None:
         mi.set_variant(variant)
     if variant not in _registered:
         milo_class = milo.make_class()
-        classes = {"milo": milo_class, "invrender_camera": camera.make_class(),
-                   "usd_preview_lobe": usd_preview.make_class(milo_class)}
+        classes = {
+            "milo": milo_class,
+            "invrender_camera": camera.make_class(),
+            "usd_preview_lobe": usd_preview.make_class(milo_class),
+        }
         for name, cls in classes.items():
             register = mi.register_sensor if issubclass(cls, mi.Sensor) else mi.register_bsdf
             register(name, lambda props, cls=cls: cls(props))
         _registered[variant] = classes
-

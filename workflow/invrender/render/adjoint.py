@@ -50,8 +50,16 @@ def backward_seed(seed: int) -> int:
     return int(seed) ^ (1 << 63)
 
 
-def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, adjoint: np.ndarray, spp: int,
-             seed: int = 0, accumulation: str = "fixed", num_buckets: int = NUM_BUCKETS) -> dict[str, np.ndarray]:
+def backward(
+    renderer: Renderer,
+    cameras: list[Camera],
+    requests: np.ndarray,
+    adjoint: np.ndarray,
+    spp: int,
+    seed: int = 0,
+    accumulation: str = "fixed",
+    num_buckets: int = NUM_BUCKETS,
+) -> dict[str, np.ndarray]:
     """d Loss / d map for every map, given dLoss/dL of each request (n, 3).
 
     accumulation: "fixed" (64-bit fixed-point atomics: the same seed gives the same bytes on one
@@ -73,7 +81,8 @@ def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, ad
     else:
         per_sample = adjoint / np.float32(norm * spp)  # each sample is 1/spp of the estimate
         launch = lambda dtype, buckets, defines, scales: _accumulate(
-            renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines, scales)
+            renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines, scales
+        )
         if accumulation == "fixed":
             atlas, kg = _fixed_point(launch, len(requests) * spp * (renderer.features.max_bounces + 2))
         else:
@@ -83,8 +92,10 @@ def backward(renderer: Renderer, cameras: list[Camera], requests: np.ndarray, ad
             atlas = atlas.reshape(-1, ATLAS_CHANNELS).astype(np.float64)
         atlas, kg = atlas * norm, kg.astype(np.float64) * norm
     atlas = atlas.reshape(host.atlas_h, host.atlas_w, ATLAS_CHANNELS)
-    out = {name: atlas[..., channels].squeeze(-1) if channels.stop - channels.start == 1 else atlas[..., channels]
-           for name, channels in GRAD_CHANNELS.items()}
+    out = {
+        name: atlas[..., channels].squeeze(-1) if channels.stop - channels.start == 1 else atlas[..., channels]
+        for name, channels in GRAD_CHANNELS.items()
+    }
     out["kg"] = kg.reshape(6, host.cube_n, host.cube_n, 3)
     return out
 
@@ -107,8 +118,9 @@ def _fixed_point(launch, additions: int) -> tuple[np.ndarray, np.ndarray]:
         fitted = 2.0 ** np.minimum(100, top - 1 - np.ceil(np.log2(np.maximum(peaks, 1e-30))))
         scales = np.where(off, fitted, scales)
         log.debug("adjoint: largest additions %s, fixed-point scales 2^%s, running again", peaks, np.log2(scales))
-    channel_scale = np.concatenate([np.full(c.stop - c.start, scales[MAPS.index(name)])
-                                    for name, c in GRAD_CHANNELS.items()])
+    channel_scale = np.concatenate(
+        [np.full(c.stop - c.start, scales[MAPS.index(name)]) for name, c in GRAD_CHANNELS.items()]
+    )
     return atlas.reshape(-1, ATLAS_CHANNELS) / channel_scale, kg / scales[MAPS.index("kg")]
 
 
@@ -136,9 +148,15 @@ def _accumulate(renderer, cameras, requests, per_sample_adjoint, spp, seed, size
     peaks = np.zeros(len(MAPS), np.float32)
     peaks_buf = cl.Buffer(context, rw, hostbuf=peaks)
     scales_buf = renderer._buffer(np.asarray(scales, np.float32))
-    renderer.sample_launches(cl.Kernel(program, "adjoint_rays"), n, spp, seed, (cams, reqs, np.int32(n)),
-                             (adj, *bufs, *(np.int32(size) for size in sizes), scales_buf, peaks_buf),
-                             desc="adjoint")
+    renderer.sample_launches(
+        cl.Kernel(program, "adjoint_rays"),
+        n,
+        spp,
+        seed,
+        (cams, reqs, np.int32(n)),
+        (adj, *bufs, *(np.int32(size) for size in sizes), scales_buf, peaks_buf),
+        desc="adjoint",
+    )
     cl.enqueue_copy(queue, peaks, peaks_buf)
     results = []
     for size, grad, buf in zip(sizes, grads, bufs):

@@ -47,8 +47,15 @@ def preview_camera(camera, max_width: int = 48):
     scale = min(1.0, max_width / camera.width)
     params = np.array(camera.params, np.float64)
     params[: 4 if camera.model != "SIMPLE_PINHOLE" else 3] *= scale
-    return Camera(camera.name, camera.model, max(1, round(camera.width * scale)), max(1, round(camera.height * scale)),
-                  params, camera.R, camera.t)
+    return Camera(
+        camera.name,
+        camera.model,
+        max(1, round(camera.width * scale)),
+        max(1, round(camera.height * scale)),
+        params,
+        camera.R,
+        camera.t,
+    )
 
 
 def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = None) -> bool:
@@ -64,8 +71,15 @@ def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = 
     from .renderer import Renderer  # the escape probe renders; renderer imports features only
 
     probe = Scene(scene.mesh, Maps.uniform(size=(1, 1), kd=1.0, ks=0.0, kg=1.0, cube=1), scene.cameras)
-    features = Features(specular=False, emission=False, emitter_sampling=False, environment=True, window=False,
-                        env_sampling=False, max_bounces=bounces)
+    features = Features(
+        specular=False,
+        emission=False,
+        emitter_sampling=False,
+        environment=True,
+        window=False,
+        env_sampling=False,
+        max_bounces=bounces,
+    )
     renderer = Renderer(probe, features, device=device)
     return any(renderer.render(preview_camera(c), spp=spp, aovs=False)["radiance"].max() > 0 for c in scene.cameras)
 
@@ -102,9 +116,11 @@ def unphysical_albedo(maps) -> str | None:
     if not rho[y, x] > 1.0:
         return None
     culprit = "kd" if kd[y, x].max() > 1.0 else "ks"
-    return (f"map {culprit}: texel (x {x}, y {y}) reflects more light than it receives: directional albedo "
-            f"{rho[y, x]:.3g} > 1 at normal incidence (kd {np.round(kd[y, x], 3).tolist()}, "
-            f"ks {np.round(ks[y, x], 3).tolist()}, ka {float(maps.ka[y, x]):.3g}; {int((rho > 1).sum())} such texels)")
+    return (
+        f"map {culprit}: texel (x {x}, y {y}) reflects more light than it receives: directional albedo "
+        f"{rho[y, x]:.3g} > 1 at normal incidence (kd {np.round(kd[y, x], 3).tolist()}, "
+        f"ks {np.round(ks[y, x], 3).tolist()}, ka {float(maps.ka[y, x]):.3g}; {int((rho > 1).sum())} such texels)"
+    )
 
 
 def warn_unphysical_albedo(maps, where, log) -> None:
@@ -115,8 +131,9 @@ def warn_unphysical_albedo(maps, where, log) -> None:
         log.warning("%s: %s", where, problem)
 
 
-def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
-                  device: str | None = None):
+def analyse_scene(
+    scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None, device: str | None = None
+):
     """(Features, evidence): the effects `scene` calls for, and the numbers behind each choice."""
     from .bsdf import max_albedo
     from .scene_buffers import emitted_power
@@ -133,19 +150,31 @@ def analyse_scene(scene, settings: AnalysisSettings = AnalysisSettings(), overri
     ks_effective = maps.ks if specular else np.zeros_like(maps.ks)
     rho = float(max_albedo(maps.kd, ks_effective, maps.ka).max())
     features = Features(
-        specular=specular, emission=emission, emitter_sampling=emitting_triangles > 0,
-        environment=environment, window=window and environment, env_sampling=environment,
-        one_sided=has_one_sided_emitters(scene.mesh, maps), max_bounces=bounces_for(rho, settings),
+        specular=specular,
+        emission=emission,
+        emitter_sampling=emitting_triangles > 0,
+        environment=environment,
+        window=window and environment,
+        env_sampling=environment,
+        one_sided=has_one_sided_emitters(scene.mesh, maps),
+        max_bounces=bounces_for(rho, settings),
     ).with_overrides(overrides)
     evidence = {
-        "max_ks": max_ks, "emitting_triangles": emitting_triangles, "max_ke": float(maps.ke.max()),
-        "max_kw": float(maps.kw.max()), "max_kg": float(maps.kg.max()), "rays_can_escape": escape,
-        "max_albedo": rho, "tail_bound": (rho ** (features.max_bounces + 1) / (1 - rho)) if rho < 1 else None,
-        "settings": asdict(settings), "overrides": overrides or {},
+        "max_ks": max_ks,
+        "emitting_triangles": emitting_triangles,
+        "max_ke": float(maps.ke.max()),
+        "max_kw": float(maps.kw.max()),
+        "max_kg": float(maps.kg.max()),
+        "rays_can_escape": escape,
+        "max_albedo": rho,
+        "tail_bound": (rho ** (features.max_bounces + 1) / (1 - rho)) if rho < 1 else None,
+        "settings": asdict(settings),
+        "overrides": overrides or {},
     }
     return features, evidence
 
 
-def analyse(scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None,
-            device: str | None = None) -> Features:
+def analyse(
+    scene, settings: AnalysisSettings = AnalysisSettings(), overrides: dict | None = None, device: str | None = None
+) -> Features:
     return analyse_scene(scene, settings, overrides, device)[0]

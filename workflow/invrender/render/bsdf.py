@@ -330,8 +330,9 @@ def specular_albedo_terms(theta_o, ka, n: int = 128, m: int = 8):
                 co * ch * (3.0 - 4.0 * ch * ch) / (a * (4.0 * ch * ch - 1.0)),  # 2 ch ci = c
             ]
         phi_breaks = [np.arccos(np.clip(np.nan_to_num(x, nan=1.0), -1.0, 1.0)) for x in x_breaks]
-        edges = np.sort(np.stack(np.broadcast_arrays(
-            np.zeros_like(a), *phi_breaks, np.full_like(a, np.pi)), axis=-1), axis=-1)
+        edges = np.sort(
+            np.stack(np.broadcast_arrays(np.zeros_like(a), *phi_breaks, np.full_like(a, np.pi)), axis=-1), axis=-1
+        )
         lo, width = edges[..., :-1, None], np.diff(edges, axis=-1)[..., None]
         phi = lo + width * xg  # (n, theta, piece, m)
         wphi = width * wg  # the weights of phi / pi are width * wg / pi
@@ -367,8 +368,33 @@ def directional_albedo(theta_o, kd, ks, ka, n: int = 128, f90_clamp: bool = True
 # the F90 kink 0.02, so each piece [0, 0.02] and [0.02, 1] is covered by nodes.
 TABLE_THETA = 0.5 * np.pi * (1.0 - (1.0 - np.linspace(0.0, 1.0, 48)) ** 2)
 TABLE_KA = np.logspace(-6.0, 0.0, 49)
-TABLE_KS = np.array([0.0, 0.0025, 0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.03, 0.05,
-                     0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
+TABLE_KS = np.array(
+    [
+        0.0,
+        0.0025,
+        0.005,
+        0.0075,
+        0.01,
+        0.0125,
+        0.015,
+        0.0175,
+        0.02,
+        0.03,
+        0.05,
+        0.075,
+        0.1,
+        0.15,
+        0.2,
+        0.3,
+        0.4,
+        0.5,
+        0.6,
+        0.7,
+        0.8,
+        0.9,
+        1.0,
+    ]
+)
 # Added to every bound: covers the quadrature error (< 1e-4 at n = 128) and the excess of the
 # true function between table nodes over the node values (measured 2e-16 on a 4x finer
 # (ka, theta) grid; tests/render/test_reference.py::test_max_albedo_is_an_upper_bound).
@@ -390,7 +416,11 @@ def albedo_bound_tables(f90_clamp: bool = True, n: int = 128):
     spec = ks[None, :, None] * a1[:, None, :] + f90(ks, f90_clamp)[None, :, None] * a2[:, None, :]
     run_max = lambda t: np.maximum.accumulate(t[::-1], axis=0)[::-1]  # max over ka' >= ka
     return {
-        "ka": ka, "ks": ks, "theta": theta, "a1": a1, "a2": a2,
+        "ka": ka,
+        "ks": ks,
+        "theta": theta,
+        "a1": a1,
+        "a2": a2,
         "spec_max": run_max(spec.max(axis=2)),
     }
 
@@ -418,8 +448,7 @@ def max_albedo(kd, ks, ka, f90_clamp: bool = True):
     ka = _clamp_ka(ka)
     t = albedo_bound_tables(f90_clamp)
     # row: last ka node <= ka (ka >= KA_MIN = TABLE_KA[0] after the clamp)
-    row = np.clip(np.searchsorted(t["ka"], ka * (1.0 + 1e-12), side="right") - 1, 0,
-                  len(t["ka"]) - 1)[..., None]
+    row = np.clip(np.searchsorted(t["ka"], ka * (1.0 + 1e-12), side="right") - 1, 0, len(t["ka"]) - 1)[..., None]
     ks_c = np.clip(ks, 0.0, 1.0)
     j = np.clip(np.searchsorted(t["ks"], ks_c, side="right") - 1, 0, len(t["ks"]) - 2)
     k0, k1 = t["ks"][j], t["ks"][j + 1]

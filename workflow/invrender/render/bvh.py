@@ -283,8 +283,14 @@ def _build_binary(tlo, thi, n_bins=N_BINS):
             b_pos = np.repeat(bstart - b_off, bcount) + np.arange(Mb, dtype=np.int64)
             b_tris = order[b_pos]
             split, right = _choose_splits(
-                lo32[:, b_tris], hi32[:, b_tris], cen32[:, b_tris],
-                bcount, b_off, node_of, axis_tol, n_bins,
+                lo32[:, b_tris],
+                hi32[:, b_tris],
+                cen32[:, b_tris],
+                bcount,
+                b_off,
+                node_of,
+                axis_tol,
+                n_bins,
             )
             if split.any():
                 # Stable in-place partition of every splitting node's range of `order`.
@@ -459,15 +465,15 @@ def _closest_hit_reference(bvh: WideBVH, v0, v1, v2, origins, directions):
     a = np.asarray(v0, dtype=np.float64).reshape(-1, 3)
     b = np.asarray(v1, dtype=np.float64).reshape(-1, 3)
     c = np.asarray(v2, dtype=np.float64).reshape(-1, 3)
-    O = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    D = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    ray_origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    ray_directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     bmin = bvh.bounds[:, :3, :].astype(np.float64)
     bmax = bvh.bounds[:, 3:, :].astype(np.float64)
     kids = bvh.children
-    ids = np.full(O.shape[0], -1, dtype=np.int64)
-    ts = np.full(O.shape[0], np.inf)
-    for r in range(O.shape[0]):
-        o, d = O[r], D[r]
+    ids = np.full(ray_origins.shape[0], -1, dtype=np.int64)
+    ts = np.full(ray_origins.shape[0], np.inf)
+    for r in range(ray_origins.shape[0]):
+        o, d = ray_origins[r], ray_directions[r]
         with np.errstate(all="ignore"):
             inv = 1.0 / d
         best_t, best_id = np.inf, -1

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cache
 
 import pyopencl as cl
 
@@ -42,7 +42,7 @@ def choose_device(name: str | None = None) -> cl.Device:
     return devices[0]
 
 
-@lru_cache(maxsize=None)
+@cache
 def context_and_queue(name: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
     """One context and in-order queue per device, shared by every renderer in the process."""
     device = choose_device(name)

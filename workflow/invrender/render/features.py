@@ -36,24 +36,26 @@ class Features:
             raise ValueError(f"features: max_bounces: expected 0..64, got {self.max_bounces}")
 
     @classmethod
-    def everything(cls, max_bounces: int = 10) -> "Features":
+    def everything(cls, max_bounces: int = 10) -> Features:
         return cls(one_sided=True, max_bounces=max_bounces)
 
     def defines(self) -> tuple[str, ...]:
-        flags = [f"-D FEATURE_{f.name.upper()}" for f in fields(self) if f.type in (bool, "bool") and getattr(self, f.name)]
+        flags = [
+            f"-D FEATURE_{f.name.upper()}" for f in fields(self) if f.type in (bool, "bool") and getattr(self, f.name)
+        ]
         return tuple(flags + [f"-D MAX_BOUNCES={self.max_bounces}"])
 
-    def with_overrides(self, overrides: dict | None) -> "Features":
+    def with_overrides(self, overrides: dict | None) -> Features:
         return replace(self, **(overrides or {}))
 
     def to_json(self) -> dict:
         return {"version": FORMAT_VERSION, "features": asdict(self)}
 
     @classmethod
-    def from_json(cls, data: dict) -> "Features":
+    def from_json(cls, data: dict) -> Features:
         return cls(**data["features"])
 
     @classmethod
-    def read(cls, path) -> "Features":
+    def read(cls, path) -> Features:
         with open(path) as handle:
             return cls.from_json(json.load(handle))

@@ -33,12 +33,21 @@ class Renderer:
     renders are then importance-sampled estimates of `scene` with a proposal that stays put.
     """
 
-    def __init__(self, scene: Scene, features: Features, device: str | None = None,
-                 w_env: float = 0.25, w_emit: float = 0.25, host_scene: HostScene | None = None,
-                 proposal: Maps | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        features: Features,
+        device: str | None = None,
+        w_env: float = 0.25,
+        w_emit: float = 0.25,
+        host_scene: HostScene | None = None,
+        proposal: Maps | None = None,
+    ):
         if not isinstance(features, Features):
-            raise TypeError(f"Renderer: features: expected a Features (render/analysis.analyse decides them), "
-                            f"got {type(features).__name__}")
+            raise TypeError(
+                f"Renderer: features: expected a Features (render/analysis.analyse decides them), "
+                f"got {type(features).__name__}"
+            )
         self.scene, self.features = scene, features
         self.w_env, self.w_emit = w_env, w_emit
         self.context, self.queue = context_and_queue(device)
@@ -69,7 +78,9 @@ class Renderer:
 
     # --- buffers -------------------------------------------------------------------------
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
-        return cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array))
+        return cl.Buffer(
+            self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array)
+        )
 
     def _zeros(self, shape, dtype=np.float32) -> tuple[np.ndarray, cl.Buffer]:
         host = np.zeros(shape, dtype)
@@ -81,15 +92,33 @@ class Renderer:
     def request_buffers(self, cameras: list[Camera], requests: np.ndarray) -> tuple[cl.Buffer, cl.Buffer]:
         return self._buffer(pack_cameras(cameras)), self._buffer(requests.astype(np.int32))
 
-    def sample_launches(self, kernel: cl.Kernel, n: int, spp: int, seed: int, head: tuple, tail: tuple,
-                        desc: str = "render", progress: bool = False) -> None:
+    def sample_launches(
+        self,
+        kernel: cl.Kernel,
+        n: int,
+        spp: int,
+        seed: int,
+        head: tuple,
+        tail: tuple,
+        desc: str = "render",
+        progress: bool = False,
+    ) -> None:
         """Run a per-request kernel over samples [0, spp) in launches of at most
         SAMPLES_PER_LAUNCH paths: kernel(scene args, *head, seed, start, count, *tail)."""
         per_launch = max(1, min(spp, SAMPLES_PER_LAUNCH // max(n, 1)))
         for start in tqdm(range(0, spp, per_launch), desc=desc, unit="launch", disable=not progress, leave=False):
             count = min(per_launch, spp - start)
-            kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, *head, np.uint64(seed),
-                   np.uint32(start), np.uint32(count), *tail)
+            kernel(
+                self.queue,
+                self._global_size(n),
+                (LOCAL_SIZE,),
+                *self.scene_args,
+                *head,
+                np.uint64(seed),
+                np.uint32(start),
+                np.uint32(count),
+                *tail,
+            )
             # One launch at a time: the progress bar tells the truth, and a signal (Ctrl-C,
             # SIGTERM) is handled within a launch instead of after the whole queue drains.
             self.queue.finish()
@@ -104,8 +133,9 @@ class Renderer:
         return 0
 
     # --- rendering -----------------------------------------------------------------------
-    def render_requests(self, cameras: list[Camera], requests: np.ndarray, spp: int, seed: int = 0,
-                        progress: bool = False) -> tuple[np.ndarray, np.ndarray, int]:
+    def render_requests(
+        self, cameras: list[Camera], requests: np.ndarray, spp: int, seed: int = 0, progress: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, int]:
         """Mean radiance (n, 3), the variance of that mean (n, 3), and the count of samples that
         were dropped (non-finite radiance) or whose path ended on a density or weight that was not
         a positive finite number: 0 unless something is wrong. For int4 requests
@@ -114,8 +144,9 @@ class Renderer:
         cams, reqs = self.request_buffers(cameras, requests)
         accum, accum_buf = self._zeros((n, 4))
         accum_sq, accum_sq_buf = self._zeros((n, 4))
-        self.sample_launches(self.render_kernel, n, spp, seed, (cams, reqs, np.int32(n)), (accum_buf, accum_sq_buf),
-                             progress=progress)
+        self.sample_launches(
+            self.render_kernel, n, spp, seed, (cams, reqs, np.int32(n)), (accum_buf, accum_sq_buf), progress=progress
+        )
         cl.enqueue_copy(self.queue, accum, accum_buf)
         cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
         dropped = int(accum[:, 3].sum() + accum_sq[:, 3].sum())
@@ -127,18 +158,32 @@ class Renderer:
     def aovs(self, cameras: list[Camera], requests: np.ndarray) -> dict[str, np.ndarray]:
         n = len(requests)
         cams, reqs = self.request_buffers(cameras, requests)
-        out = {"depth": self._zeros(n), "normal": self._zeros((n, 4)), "uv": self._zeros((n, 2)),
-               "instance_id": self._zeros(n, np.int32), "triangle_id": self._zeros(n, np.int32)}
-        self.aov_kernel(self.queue, self._global_size(n), (LOCAL_SIZE,), *self.scene_args, cams, reqs,
-                                  np.int32(n), *(buf for _, buf in out.values()))
+        out = {
+            "depth": self._zeros(n),
+            "normal": self._zeros((n, 4)),
+            "uv": self._zeros((n, 2)),
+            "instance_id": self._zeros(n, np.int32),
+            "triangle_id": self._zeros(n, np.int32),
+        }
+        self.aov_kernel(
+            self.queue,
+            self._global_size(n),
+            (LOCAL_SIZE,),
+            *self.scene_args,
+            cams,
+            reqs,
+            np.int32(n),
+            *(buf for _, buf in out.values()),
+        )
         for host, buf in out.values():
             cl.enqueue_copy(self.queue, host, buf)
         result = {name: host for name, (host, _) in out.items()}
         result["normal"] = result["normal"][:, :3]
         return result
 
-    def render(self, camera: Camera, spp: int = 64, seed: int = 0, aovs: bool = True,
-               progress: bool = False) -> dict[str, np.ndarray]:
+    def render(
+        self, camera: Camera, spp: int = 64, seed: int = 0, aovs: bool = True, progress: bool = False
+    ) -> dict[str, np.ndarray]:
         """One image: 'radiance' (H, W, 3), 'variance' of each pixel's mean, and with aovs
         'depth', 'normal', 'uv', 'instance_id', 'triangle_id' (H, W, ...)."""
         requests = pixel_requests(camera, 0, self.ray_offset(camera))

@@ -84,7 +84,6 @@ def uniform4(seed: int, ray, sample, bounce, block=0) -> np.ndarray:
     modulo 2^32; seed is a 64-bit integer. A pure function: the same arguments always give
     the same numbers, on any device.
     """
-    words = np.broadcast_arrays(*(np.asarray(v, dtype=np.int64) & 0xFFFFFFFF
-                                  for v in (ray, sample, bounce, block)))
+    words = np.broadcast_arrays(*(np.asarray(v, dtype=np.int64) & 0xFFFFFFFF for v in (ray, sample, bounce, block)))
     counter = np.stack([w.astype(np.uint32) for w in words], axis=-1)
     return to_unit_float(philox4x32(counter, seed_key(seed)))

@@ -143,8 +143,10 @@ class EmitterDistribution:
         x, d = np.broadcast_arrays(x, d)
         shape = x.shape[:-1]
         x, d = x.reshape(-1, 3), bsdf.normalize(d.reshape(-1, 3))
-        out = np.concatenate([self._pdf_block(x[a:a + chunk], d[a:a + chunk], t_min)
-                              for a in range(0, len(x), chunk)] or [np.zeros(0)])
+        out = np.concatenate(
+            [self._pdf_block(x[a : a + chunk], d[a : a + chunk], t_min) for a in range(0, len(x), chunk)]
+            or [np.zeros(0)]
+        )
         return out.reshape(shape)
 
     def _pdf_block(self, x, d, t_min):
@@ -188,8 +190,7 @@ def mixture_weights(kd, ks, w_env: float = 0.25, w_emit: float = 0.25):
     kd, ks = _f64(kd, ks)
     share = 1.0 - w_env - w_emit
     if w_env < 0 or w_emit < 0 or share < 0:
-        raise ValueError(f"mixture_weights: need w_env, w_emit >= 0 and w_env + w_emit <= 1, "
-                         f"got {w_env}, {w_emit}")
+        raise ValueError(f"mixture_weights: need w_env, w_emit >= 0 and w_env + w_emit <= 1, got {w_env}, {w_emit}")
     ld = luminance(np.maximum(kd, 0.0))
     ls = luminance(np.maximum(ks, 0.0))
     tot = ld + ls
@@ -198,8 +199,7 @@ def mixture_weights(kd, ks, w_env: float = 0.25, w_emit: float = 0.25):
     w_d = np.where(pos, share * ld / tot_s, share)
     w_s = np.where(pos, share * ls / tot_s, 0.0)
     w_d, w_s = np.broadcast_arrays(w_d, w_s)
-    return np.stack([w_d, w_s, np.full(w_d.shape, float(w_env)), np.full(w_d.shape, float(w_emit))],
-                    axis=-1)
+    return np.stack([w_d, w_s, np.full(w_d.shape, float(w_env)), np.full(w_d.shape, float(w_emit))], axis=-1)
 
 
 def strategy_pdfs(n, wo, wi, ka, env=None, emitters=None, x=None, t_min: float = 0.0):
@@ -257,10 +257,11 @@ def sample_mixture(weights, n, wo, ka, u, env=None, emitters=None, x=None):
     k = choose_strategy(weights, u[..., 0])
     u1, u2, u3 = u[..., 1], u[..., 2], u[..., 3]
     shape = k.shape + (3,)
-    cands = [np.broadcast_to(bsdf.sample_cosine(n, u1, u2), shape),
-             np.broadcast_to(bsdf.sample_specular(n, wo, ka, u1, u2), shape),
-             np.broadcast_to(env.sample(u1, u2, u3), shape) if env is not None else np.zeros(shape),
-             np.broadcast_to(emitters.sample(x, u1, u2, u3), shape) if emitters is not None
-             else np.zeros(shape)]
+    cands = [
+        np.broadcast_to(bsdf.sample_cosine(n, u1, u2), shape),
+        np.broadcast_to(bsdf.sample_specular(n, wo, ka, u1, u2), shape),
+        np.broadcast_to(env.sample(u1, u2, u3), shape) if env is not None else np.zeros(shape),
+        np.broadcast_to(emitters.sample(x, u1, u2, u3), shape) if emitters is not None else np.zeros(shape),
+    ]
     wi = np.select([(k == j)[..., None] for j in range(4)], cands)
     return wi, k

@@ -15,17 +15,26 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
+from ..scene.cubemap import cube_texel_solid_angles
 from ..scene.types import Camera, Maps, Mesh
 from .bvh import WideBVH, build_bvh, triangle_vertices
-from ..scene.cubemap import cube_texel_solid_angles
 from .program import KERNEL_DIR
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 # kernels/camera.h CameraData: 24 four-byte fields, no padding on any OpenCL device.
 CAMERA_DTYPE = np.dtype(
-    [("R", "<f4", 9), ("C", "<f4", 3), ("f", "<f4", 2), ("c", "<f4", 2), ("k", "<f4", 4),
-     ("width", "<i4"), ("height", "<i4"), ("distorted", "<i4"), ("pad", "<i4")]
+    [
+        ("R", "<f4", 9),
+        ("C", "<f4", 3),
+        ("f", "<f4", 2),
+        ("c", "<f4", 2),
+        ("k", "<f4", 4),
+        ("width", "<i4"),
+        ("height", "<i4"),
+        ("distorted", "<i4"),
+        ("pad", "<i4"),
+    ]
 )
 
 
@@ -39,8 +48,15 @@ class SceneArg:
 
 
 # numpy kind, item size and elements per value of each OpenCL type the list may use.
-CL_TYPES = {"float": ("f", 4, 1), "float2": ("f", 4, 2), "float4": ("f", 4, 4), "float8": ("f", 4, 8),
-            "int": ("i", 4, 1), "int8": ("i", 4, 8), "uchar": ("u", 1, 1)}
+CL_TYPES = {
+    "float": ("f", 4, 1),
+    "float2": ("f", 4, 2),
+    "float4": ("f", 4, 4),
+    "float8": ("f", 4, 8),
+    "int": ("i", 4, 1),
+    "int8": ("i", 4, 8),
+    "uchar": ("u", 1, 1),
+}
 _SCENE_DATA_START = "#define SCENE_DATA(BUFFER, VALUE, NEXT)"
 _SCENE_DATA_ENTRY = re.compile(r"^\s+(BUFFER|VALUE)\((\w+), (\w+)\)( NEXT)?\s*(/\*[^*]*\*/)?\s*(\\)?$")
 
@@ -62,8 +78,10 @@ def read_scene_data(path: Path = KERNEL_DIR / "scene_data.h") -> tuple[SceneArg,
         match = _SCENE_DATA_ENTRY.match(lines[number])
         number += 1
         if not match:
-            raise ValueError(f"{where(number)}: expected `    BUFFER(type, name) NEXT /* ... */ \\` or VALUE, "
-                             f"got {lines[number - 1]!r}")
+            raise ValueError(
+                f"{where(number)}: expected `    BUFFER(type, name) NEXT /* ... */ \\` or VALUE, "
+                f"got {lines[number - 1]!r}"
+            )
         kind, cl_type, name, has_next, _, continued = match.groups()
         if cl_type not in CL_TYPES:
             raise ValueError(f"{where(number)}: type {cl_type!r}: expected one of {sorted(CL_TYPES)}")
@@ -216,7 +234,7 @@ class HostScene:
     env_black: bool
 
     @classmethod
-    def pack(cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None) -> "HostScene":
+    def pack(cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None) -> HostScene:
         v0, v1, v2 = triangle_vertices(mesh.positions, mesh.faces)
         bvh = bvh or build_bvh(v0, v1, v2)
         order = bvh.tri_order
@@ -237,15 +255,28 @@ class HostScene:
         env_pmf, env_cdf, env_black = environment_distribution(maps.kg)
         h, w = maps.atlas_shape
         return cls(
-            tri_v=tri_v, tri_uv=tri_uv, tri_id=order.astype(np.int32),
-            tri_instance=instances[order].astype(np.int32), tri_one_sided=one_sided[order],
-            bvh_bounds=bvh.bounds, bvh_children=bvh.children, material=pack_material(maps),
-            atlas_w=w, atlas_h=h, kg=_as_float4(maps.kg.reshape(-1, 3)), cube_n=maps.kg.shape[1],
-            env_cdf=env_cdf, env_pmf=env_pmf,
+            tri_v=tri_v,
+            tri_uv=tri_uv,
+            tri_id=order.astype(np.int32),
+            tri_instance=instances[order].astype(np.int32),
+            tri_one_sided=one_sided[order],
+            bvh_bounds=bvh.bounds,
+            bvh_children=bvh.children,
+            material=pack_material(maps),
+            atlas_w=w,
+            atlas_h=h,
+            kg=_as_float4(maps.kg.reshape(-1, 3)),
+            cube_n=maps.kg.shape[1],
+            env_cdf=env_cdf,
+            env_pmf=env_pmf,
             em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
-            em_cdf=em_cdf.astype(np.float32), em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
-            num_emitters=len(em_order), em_bounds=em_bvh.bounds, em_children=em_bvh.children,
-            em_one_sided=one_sided[em_order], bvh=bvh,
+            em_cdf=em_cdf.astype(np.float32),
+            em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
+            num_emitters=len(em_order),
+            em_bounds=em_bvh.bounds,
+            em_children=em_bvh.children,
+            em_one_sided=one_sided[em_order],
+            bvh=bvh,
             env_black=env_black,
         )
 
@@ -254,7 +285,7 @@ class HostScene:
         so its share goes to the BSDF lobes instead of to directions it cannot draw."""
         return np.float32(0.0 if self.env_black else w_env), np.float32(w_emit if self.num_emitters > 0 else 0.0)
 
-    def sampling_from(self, proposal: "HostScene") -> "HostScene":
+    def sampling_from(self, proposal: HostScene) -> HostScene:
         """This scene with the environment and emitter sampling tables of `proposal`."""
         return replace(self, **{name: getattr(proposal, name) for name in SAMPLING_ARGS})
 
@@ -281,8 +312,12 @@ class HostScene:
 def _checked_buffer(arg: SceneArg, value) -> np.ndarray:
     """`value` if its elements are the header's type: vector types as the last axis."""
     kind, size, width = CL_TYPES[arg.cl_type]
-    fits = isinstance(value, np.ndarray) and value.dtype.kind == kind and value.dtype.itemsize == size and (
-        value.shape[-1:] == (width,) if width > 1 else value.ndim == 1)
+    fits = (
+        isinstance(value, np.ndarray)
+        and value.dtype.kind == kind
+        and value.dtype.itemsize == size
+        and (value.shape[-1:] == (width,) if width > 1 else value.ndim == 1)
+    )
     if not fits:
         got = f"{value.dtype} {value.shape}" if isinstance(value, np.ndarray) else type(value).__name__
         raise ValueError(f"HostScene.{arg.name}: expected {arg.cl_type} elements (kernels/scene_data.h), got {got}")
@@ -300,5 +335,15 @@ if _missing:
 GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "tri_one_sided", "bvh_bounds", "bvh_children")
 
 # Arguments that say how directions are sampled (strategies 3 and 4), built from kg and ke.
-SAMPLING_ARGS = ("env_cdf", "env_pmf", "env_black", "em_v", "em_cdf", "em_pdf_area", "num_emitters", "em_bounds",
-                 "em_children", "em_one_sided")
+SAMPLING_ARGS = (
+    "env_cdf",
+    "env_pmf",
+    "env_black",
+    "em_v",
+    "em_cdf",
+    "em_pdf_area",
+    "num_emitters",
+    "em_bounds",
+    "em_children",
+    "em_one_sided",
+)

@@ -20,9 +20,23 @@ class RenderRays(torch.autograd.Function):
     detached (docs/renderer.md, "Gradients")."""
 
     @staticmethod
-    def forward(ctx, kd, ks, ka, ke, kw, kg, renderer: Renderer, cameras: list[Camera], requests: np.ndarray,
-                spp: int, seed: int):
-        arrays = {name: t.detach().cpu().numpy().astype(np.float32) for name, t in zip(MAP_ORDER, (kd, ks, ka, ke, kw, kg))}
+    def forward(
+        ctx,
+        kd,
+        ks,
+        ka,
+        ke,
+        kw,
+        kg,
+        renderer: Renderer,
+        cameras: list[Camera],
+        requests: np.ndarray,
+        spp: int,
+        seed: int,
+    ):
+        arrays = {
+            name: t.detach().cpu().numpy().astype(np.float32) for name, t in zip(MAP_ORDER, (kd, ks, ka, ke, kw, kg))
+        }
         renderer.set_maps(Maps(**arrays))
         mean, _, _ = renderer.render_requests(cameras, requests, spp, seed)
         ctx.state = (renderer, cameras, requests, spp, seed)
@@ -31,8 +45,7 @@ class RenderRays(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_output):
         renderer, cameras, requests, spp, seed = ctx.state
-        grads = backward(renderer, cameras, requests, grad_output.detach().cpu().numpy(), spp,
-                         backward_seed(seed))
+        grads = backward(renderer, cameras, requests, grad_output.detach().cpu().numpy(), spp, backward_seed(seed))
         return tuple(torch.from_numpy(grads[name].astype(np.float32)) for name in MAP_ORDER) + (None,) * 5
 
 

@@ -19,8 +19,9 @@ from ..scene.types import SceneError, require_positive
 log = logging.getLogger(__name__)
 
 
-def decide_features(scene, features_path=None, max_bounces: int | None = None, overrides: dict | None = None,
-                    device: str | None = None) -> Features:
+def decide_features(
+    scene, features_path=None, max_bounces: int | None = None, overrides: dict | None = None, device: str | None = None
+) -> Features:
     """features.json if given, else the analysis of the scene; then --max-bounces and --set win."""
     features = Features.read(features_path) if features_path else analyse(scene, device=device)
     overrides = dict(overrides or {})
@@ -30,18 +31,31 @@ def decide_features(scene, features_path=None, max_bounces: int | None = None, o
         return features.with_overrides(overrides)
     except (TypeError, ValueError) as error:  # an unknown feature name, or an impossible combination
         known = ", ".join(Features.__dataclass_fields__)
-        raise SceneError("render --set/--max-bounces", json.dumps(overrides),
-                         f"features named {known}, in a combination the kernels allow ({error})") from None
+        raise SceneError(
+            "render --set/--max-bounces",
+            json.dumps(overrides),
+            f"features named {known}, in a combination the kernels allow ({error})",
+        ) from None
 
 
-def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, device=None, progress=True,
-        max_bounces: int | None = None, overrides: dict | None = None) -> Features:
+def run(
+    scene_dir,
+    out_dir,
+    features_path=None,
+    spp=64,
+    seed=0,
+    cameras=None,
+    device=None,
+    progress=True,
+    max_bounces: int | None = None,
+    overrides: dict | None = None,
+) -> Features:
     """Render the scene's cameras (or those named) to out_dir/<camera>.exr + .png preview (the
     top level holds only views, so a glob finds them), and beside them in out_dir/aovs/ the
     variance of each pixel's mean, <camera>_variance.exr (the Monte Carlo error bar of the image:
-    its square root is the standard error), and <camera>_{depth,normal,uv,instance,triangle}.exr: depth along the optical axis
-    (inf on a miss), world normal, UV (R, G), instance id (0 = none) and triangle id + 1 (0 =
-    miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
+    its square root is the standard error), and <camera>_{depth,normal,uv,instance,triangle}.exr:
+    depth along the optical axis (inf on a miss), world normal, UV (R, G), instance id (0 = none)
+    and triangle id + 1 (0 = miss) as exact 32-bit integers, plus the instance mask as a 16-bit PNG."""
     check_output(out_dir, "renders")  # before the work, not after it
     spp = require_positive("render --spp", "samples per pixel", spp)
     scene = load_scene(scene_dir)
@@ -52,8 +66,12 @@ def run(scene_dir, out_dir, features_path=None, spp=64, seed=0, cameras=None, de
     selected = [c for c in scene.cameras if not cameras or c.name in cameras]
     if cameras and len(selected) != len(cameras):
         missing = sorted(set(cameras) - {c.name for c in selected})
-        raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", f"a camera named {', '.join(missing)} "
-                         f"(--camera); the scene has {', '.join(c.name for c in scene.cameras[:5])}")
+        raise SceneError(
+            Path(scene_dir) / SCENE_JSON,
+            "cameras",
+            f"a camera named {', '.join(missing)} "
+            f"(--camera); the scene has {', '.join(c.name for c in scene.cameras[:5])}",
+        )
     renderer = Renderer(scene, features, device=device)
     with atomic_dir(Path(out_dir), kind="renders") as tmp:
         tmp = Path(tmp)

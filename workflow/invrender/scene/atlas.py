@@ -16,9 +16,10 @@ point (nearest-texel lookup, ``texel_index``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import xatlas
@@ -98,8 +99,9 @@ def unwrap(positions, faces, **options) -> UVAtlas:
     """``_unwrap`` (below) in a child process: a signal stops it at once, and a hang or a crash
     of xatlas is a NativeFailure naming the face count, not a stage that never ends or dies."""
     limit = UNWRAP_LIMIT_S[0] + UNWRAP_LIMIT_S[1] * len(faces)
-    return call_isolated(_unwrap, positions, faces, limit_s=limit, what=f"xatlas unwrapping {len(faces)} faces",
-                         **options)
+    return call_isolated(
+        _unwrap, positions, faces, limit_s=limit, what=f"xatlas unwrapping {len(faces)} faces", **options
+    )
 
 
 def _unwrap(
@@ -240,7 +242,7 @@ class AtlasTexels:
                 np.savez_compressed(f, **{k: getattr(self, k) for k in ATLAS_KEYS})
 
     @classmethod
-    def load(cls, path) -> "AtlasTexels":
+    def load(cls, path) -> AtlasTexels:
         path = Path(path)
         with np.load(path) as data:
             missing = [k for k in ATLAS_KEYS if k not in data]

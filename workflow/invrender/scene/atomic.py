@@ -32,9 +32,9 @@ import shutil
 import signal
 import socket
 import threading
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable
 
 from .types import SceneError
 
@@ -143,8 +143,9 @@ def _check_parent(path: Path) -> None:
         probe.mkdir()
         probe.rmdir()
     except OSError as error:
-        raise SceneError(parent, "output", f"a directory where {path} can be written "
-                         f"({error.strerror or error})") from None
+        raise SceneError(
+            parent, "output", f"a directory where {path} can be written ({error.strerror or error})"
+        ) from None
 
 
 def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = None) -> Path:
@@ -156,8 +157,11 @@ def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = Non
     naming the path and what was expected, and nothing is touched.
     """
     path = Path(path)
-    wanted = (f"a new path or an earlier {kind} file" if recognise
-              else f"a new path, an empty directory or an earlier {kind} directory of invrender")
+    wanted = (
+        f"a new path or an earlier {kind} file"
+        if recognise
+        else f"a new path, an empty directory or an earlier {kind} directory of invrender"
+    )
     if path.is_symlink():
         raise SceneError(path, "output", f"{wanted}, not a symbolic link (remove it or choose another --out)")
     _check_parent(path)
@@ -169,8 +173,9 @@ def check_output(path, kind: str, recognise: Callable[[Path], bool] | None = Non
         what = "a directory" if path.is_dir() else "a file that is not one"
         raise SceneError(path, "output", f"{wanted}; it is {what}, which would be lost (choose another --out)")
     if not path.is_dir():
-        raise SceneError(path, "output", f"{wanted}; it is an existing file, which would be lost "
-                         "(choose another --out)")
+        raise SceneError(
+            path, "output", f"{wanted}; it is an existing file, which would be lost (choose another --out)"
+        )
     found = _kind_of(path)
     if found == kind or not any(path.iterdir()):
         return path
@@ -189,8 +194,10 @@ def _signals_held():
         yield
         return
     pending = []
-    previous = {signum: signal.signal(signum, lambda number, frame: pending.append(number))
-                for signum in (signal.SIGINT, signal.SIGTERM)}
+    previous = {
+        signum: signal.signal(signum, lambda number, frame: pending.append(number))
+        for signum in (signal.SIGINT, signal.SIGTERM)
+    }
     try:
         yield
     finally:
@@ -205,8 +212,7 @@ def _signals_held():
 
 
 @contextmanager
-def atomic_path(path, fsync: bool = True, kind: str | None = None,
-                recognise: Callable[[Path], bool] | None = None):
+def atomic_path(path, fsync: bool = True, kind: str | None = None, recognise: Callable[[Path], bool] | None = None):
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
 
     The temporary name is hidden (leading dot) and keeps the target's suffix, so writers

@@ -87,14 +87,14 @@ def read_colmap(directory) -> list[Camera]:
             )
         pose = image.cam_from_world().matrix()
         camera = Camera(
-                name=image.name,
-                model=model,
-                width=int(cam.width),
-                height=int(cam.height),
-                params=np.asarray(cam.params, np.float64).copy(),
-                R=np.asarray(pose[:, :3], np.float64).copy(),
-                t=np.asarray(pose[:, 3], np.float64).copy(),
-            )
+            name=image.name,
+            model=model,
+            width=int(cam.width),
+            height=int(cam.height),
+            params=np.asarray(cam.params, np.float64).copy(),
+            R=np.asarray(pose[:, :3], np.float64).copy(),
+            t=np.asarray(pose[:, 3], np.float64).copy(),
+        )
         check_camera(camera, cameras_file, f"camera {image.camera_id} (image {image.name})")
         out.append(camera)
     if skipped:
@@ -128,14 +128,19 @@ def check_camera(cam: Camera, file, field: str | None = None) -> None:
         raise SceneError(file, f"{field} focal length", f"positive focal lengths (pixels), got fx {fx:g}, fy {fy:g}")
     mx, my = PRINCIPAL_POINT_MARGIN * cam.width, PRINCIPAL_POINT_MARGIN * cam.height
     if not (-mx <= cx <= cam.width + mx and -my <= cy <= cam.height + my):
-        raise SceneError(file, f"{field} principal point", f"cx, cy within the {cam.width} x {cam.height} image "
-                         f"or {PRINCIPAL_POINT_MARGIN:.0%} of its size outside it, got ({cx:g}, {cy:g})")
+        raise SceneError(
+            file,
+            f"{field} principal point",
+            f"cx, cy within the {cam.width} x {cam.height} image "
+            f"or {PRINCIPAL_POINT_MARGIN:.0%} of its size outside it, got ({cx:g}, {cy:g})",
+        )
     R, t = np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64)
     if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise SceneError(file, f"{field} pose", "a finite rotation and translation")
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-        raise SceneError(file, f"{field} pose rotation", f"an orthonormal rotation with det +1, got det "
-                         f"{np.linalg.det(R):.6g}")
+        raise SceneError(
+            file, f"{field} pose rotation", f"an orthonormal rotation with det +1, got det {np.linalg.det(R):.6g}"
+        )
 
 
 def _colmap_error(directory: Path, exc: Exception) -> SceneError:
@@ -144,14 +149,25 @@ def _colmap_error(directory: Path, exc: Exception) -> SceneError:
     reason = message.split("] ", 1)[-1].replace("Check failed: ", "")
     lower = message.lower()
     if "verifyparams" in lower:
-        return SceneError(_model_file(directory, "cameras"), "camera params",
-                          f"the parameter count and values of each camera's model ({reason})")
+        return SceneError(
+            _model_file(directory, "cameras"),
+            "camera params",
+            f"the parameter count and values of each camera's model ({reason})",
+        )
     if "rig with id" in lower:
-        return SceneError(_model_file(directory, "frames"), "frame rig_id",
-                          f"the id of a rig in {_model_file(directory, 'rigs').name} ({reason})")
+        return SceneError(
+            _model_file(directory, "frames"),
+            "frame rig_id",
+            f"the id of a rig in {_model_file(directory, 'rigs').name} ({reason})",
+        )
     # Which file a failed check concerns, by the words COLMAP's readers use for its fields.
-    for name, words in (("frames", ("rig with id", "frame", "rig_from_world", "data_id")), ("rigs", ("rig", "sensor")),
-                        ("cameras", ("camera",)), ("images", ("image",)), ("points3D", ("point",))):
+    for name, words in (
+        ("frames", ("rig with id", "frame", "rig_from_world", "data_id")),
+        ("rigs", ("rig", "sensor")),
+        ("cameras", ("camera",)),
+        ("images", ("image",)),
+        ("points3D", ("point",)),
+    ):
         if any(w in lower for w in words):
             return SceneError(_model_file(directory, name), "(COLMAP model)", f"a readable {name} file ({reason})")
     return SceneError(directory, "(COLMAP model)", f"a readable COLMAP sparse model ({reason})")
@@ -184,9 +200,7 @@ def write_colmap(directory, cameras: list[Camera]) -> None:
             )
         )
         pose = np.hstack([np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64).reshape(3, 1)])
-        rec.add_image_with_trivial_frame(
-            pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose)
-        )
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose))
     with atomic_dir(directory, kind="cameras") as tmp:
         rec.write_text(str(tmp))
 
@@ -345,8 +359,15 @@ def read_transforms_json(path) -> list[Camera]:
         u, _, vt = np.linalg.svd(rot)  # snap to the nearest rotation
         rot = u @ vt
         R = rot.T
-        camera = Camera(name=name, model=model, width=int(round(w)), height=int(round(h)),
-                        params=np.asarray(params, np.float64), R=R, t=-R @ center)
+        camera = Camera(
+            name=name,
+            model=model,
+            width=int(round(w)),
+            height=int(round(h)),
+            params=np.asarray(params, np.float64),
+            R=R,
+            t=-R @ center,
+        )
         check_camera(camera, path, f"{field} ({name})")
         out.append(camera)
     out.sort(key=lambda c: c.name)
@@ -362,9 +383,12 @@ def read_transforms_json(path) -> list[Camera]:
 
 # Forward (z) and down (y) axes of the six cube-face cameras, in the order +X, -X, +Y, -Y, +Z, -Z.
 CUBE_FACE_AXES = (
-    ((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)),
-    ((0, 1, 0), (0, 0, 1)), ((0, -1, 0), (0, 0, -1)),
-    ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)),
+    ((1, 0, 0), (0, -1, 0)),
+    ((-1, 0, 0), (0, -1, 0)),
+    ((0, 1, 0), (0, 0, 1)),
+    ((0, -1, 0), (0, 0, -1)),
+    ((0, 0, 1), (0, -1, 0)),
+    ((0, 0, -1), (0, -1, 0)),
 )
 CUBE_FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
 

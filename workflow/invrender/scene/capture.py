@@ -22,8 +22,11 @@ def read_view(images_dir, camera: Camera) -> np.ndarray:
         raise SceneError(path, f"image of camera {camera.name}", "an image for every camera of the model")
     image = read_image(path)
     if image.shape[:2] != (camera.height, camera.width):
-        raise SceneError(path, "size", f"{camera.width} x {camera.height} as its camera says, got "
-                                       f"{image.shape[1]} x {image.shape[0]}")
+        raise SceneError(
+            path,
+            "size",
+            f"{camera.width} x {camera.height} as its camera says, got {image.shape[1]} x {image.shape[0]}",
+        )
     return image[..., :3] if image.shape[2] >= 3 else np.repeat(image, 3, axis=2)
 
 

@@ -33,9 +33,22 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FACES", "direction_to_cube", "cube_to_direction", "cube_texel", "cube_texel_solid_angles",
-           "texel_directions", "as_cube", "lookup_cube", "kg_to_stacked", "kg_from_stacked",
-           "latlong_directions", "latlong_solid_angles", "latlong_to_cube", "cube_to_latlong"]
+__all__ = [
+    "FACES",
+    "direction_to_cube",
+    "cube_to_direction",
+    "cube_texel",
+    "cube_texel_solid_angles",
+    "texel_directions",
+    "as_cube",
+    "lookup_cube",
+    "kg_to_stacked",
+    "kg_from_stacked",
+    "latlong_directions",
+    "latlong_solid_angles",
+    "latlong_to_cube",
+    "cube_to_latlong",
+]
 
 FACES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 
@@ -57,8 +70,9 @@ def direction_to_cube(d):
     ax, ay, az = np.abs(rx), np.abs(ry), np.abs(rz)
     x_major = (ax >= ay) & (ax >= az)
     y_major = ~x_major & (ay >= az)
-    face = np.where(x_major, np.where(rx >= 0, 0, 1),
-                    np.where(y_major, np.where(ry >= 0, 2, 3), np.where(rz >= 0, 4, 5)))
+    face = np.where(
+        x_major, np.where(rx >= 0, 0, 1), np.where(y_major, np.where(ry >= 0, 2, 3), np.where(rz >= 0, 4, 5))
+    )
     # table 3.21: (sc, tc, ma) per face
     conds = [face == k for k in range(6)]
     sc = np.select(conds, [-rz, rz, rx, rx, rx, -rx])
@@ -113,8 +127,7 @@ def cube_texel_solid_angles(n: int):
     e = np.linspace(-1.0, 1.0, n + 1)  # texel edges in u = 2 s - 1 (columns), v = 2 t - 1 (rows)
     v0, v1 = e[:-1, None], e[1:, None]
     u0, u1 = e[None, :-1], e[None, 1:]
-    return (_area_element(u1, v1) - _area_element(u0, v1)
-            - _area_element(u1, v0) + _area_element(u0, v0))
+    return _area_element(u1, v1) - _area_element(u0, v1) - _area_element(u1, v0) + _area_element(u0, v0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -250,9 +263,15 @@ def _nodes(n: int, width: int, rotation) -> tuple[np.ndarray, np.ndarray]:
     e = np.arange(n + 1) / n
     face, s, t = np.meshgrid(np.arange(6), e, e, indexing="ij")
     corners = cube_to_direction(face, s, t).reshape(-1, 3) @ _dome(rotation)
-    breaks = np.unique(np.concatenate([np.arctan2(corners[:, 0], corners[:, 2]),
-                                       _column_edges(width, COLUMN_SPLIT),
-                                       np.linspace(-np.pi, np.pi, MIN_INTERVALS + 1)]))
+    breaks = np.unique(
+        np.concatenate(
+            [
+                np.arctan2(corners[:, 0], corners[:, 2]),
+                _column_edges(width, COLUMN_SPLIT),
+                np.linspace(-np.pi, np.pi, MIN_INTERVALS + 1),
+            ]
+        )
+    )
     breaks = breaks[(breaks >= -np.pi) & (breaks <= np.pi)]
     lo, hi = breaks[:-1], breaks[1:]
     keep = hi > lo
@@ -270,7 +289,7 @@ def _sweep(n: int, width: int, rotation, chunk_cells: int):
     columns = np.clip(np.rint((np.pi - xs) * (width - 1) / (2.0 * np.pi)), 0, width - 1).astype(np.int64)
     step = max(16, min(256, chunk_cells // (4 * n + 4)))  # few meridians: a narrow longitude range, few arcs
     for a in range(0, len(xs), step):
-        x, w, j = xs[a:a + step, None], ws[a:a + step], columns[a:a + step]
+        x, w, j = xs[a : a + step, None], ws[a : a + step], columns[a : a + step]
         arcs = _arcs_over(first, span, x[0, 0], x[-1, 0])
         normal, m0, m1 = normal_all[arcs], m0_all[arcs], m1_all[arcs]
         sx, cx = np.sin(x), np.cos(x)
@@ -278,9 +297,10 @@ def _sweep(n: int, width: int, rotation, chunk_cells: int):
         ny = normal[:, 1]
         z = -along * np.sign(ny) / np.sqrt(ny * ny + along * along)
         c = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
-        on_arc = ((c * (m0[:, 0] * sx + m0[:, 2] * cx) + z * m0[:, 1] >= -1e-9)
-                  & (c * (m1[:, 0] * sx + m1[:, 2] * cx) + z * m1[:, 1] >= -1e-9))
-        z = np.sort(np.where(on_arc, np.clip(z, -1.0, 1.0), 1.0), axis=1)[:, :max(1, on_arc.sum(1).max())]
+        on_arc = (c * (m0[:, 0] * sx + m0[:, 2] * cx) + z * m0[:, 1] >= -1e-9) & (
+            c * (m1[:, 0] * sx + m1[:, 2] * cx) + z * m1[:, 1] >= -1e-9
+        )
+        z = np.sort(np.where(on_arc, np.clip(z, -1.0, 1.0), 1.0), axis=1)[:, : max(1, on_arc.sum(1).max())]
         b = np.concatenate([np.full((len(x), 1), -1.0), z, np.ones((len(x), 1))], axis=1)
         zm = 0.5 * (b[:, :-1] + b[:, 1:])
         cm = np.sqrt(1.0 - zm * zm)
@@ -299,8 +319,9 @@ def latlong_to_cube(image, n: int, rotation=None) -> np.ndarray:
     _check_latlong(width, height)
     columns = np.ascontiguousarray(image[::-1].transpose(1, 0, 2))  # (W, H, C), rows by ascending z
     z_edges = _row_edges_z(height)
-    cumulative = np.concatenate([np.zeros((width, 1, channels)),
-                                 np.cumsum(columns * np.diff(z_edges)[:, None], axis=1)], axis=1)
+    cumulative = np.concatenate(
+        [np.zeros((width, 1, channels)), np.cumsum(columns * np.diff(z_edges)[:, None], axis=1)], axis=1
+    )
     total = np.zeros((6 * n * n, channels))
     for j, w, b, texel in _sweep(n, width, rotation, 1 << 21):
         e = np.clip(np.searchsorted(z_edges, b, side="right") - 1, 0, height - 1)
@@ -337,8 +358,8 @@ def cube_to_latlong(kg, width: int, height: int | None = None, rotation=None) ->
         size = (j.max() - low + 1) * height
         for k in range(channels):
             d = delta[..., k].ravel()
-            weight[low:low + size // height, :, k] += np.bincount(bins, d, size).reshape(-1, height)
-            moment[low:low + size // height, :, k] += np.bincount(bins, d * b.ravel(), size).reshape(-1, height)
+            weight[low : low + size // height, :, k] += np.bincount(bins, d, size).reshape(-1, height)
+            moment[low : low + size // height, :, k] += np.bincount(bins, d * b.ravel(), size).reshape(-1, height)
     below = lambda a: np.concatenate([np.zeros((width, 1, channels)), np.cumsum(a, axis=1)], axis=1)
     weight_below, moment_below = below(weight), below(moment)
     integral = z_edges[:, None] * (weight_below[:, -1:] - weight_below) + moment_below  # (W, H + 1, C)

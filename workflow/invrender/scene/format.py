@@ -213,8 +213,10 @@ def validate_atlas(maps: dict, files: dict, prefix: str = "maps") -> Atlas:
         shape = checked[name].shape[:2]
         if shape != ref:
             raise SceneError(
-                files[name], f"{prefix}.{name}",
-                f"the size of {prefix}.kd (map size mismatch: {name} is {shape[0]}x{shape[1]}, kd is {ref[0]}x{ref[1]}, H x W)",
+                files[name],
+                f"{prefix}.{name}",
+                f"the size of {prefix}.kd (map size mismatch: {name} is {shape[0]}x{shape[1]}, "
+                f"kd is {ref[0]}x{ref[1]}, H x W)",
             )
     return Atlas(**checked)
 
@@ -225,7 +227,9 @@ def validate_kg(stacked: np.ndarray, file, field: str = "maps.kg") -> np.ndarray
     h, w = checked.shape[:2]
     if h != 6 * w:
         raise SceneError(
-            file, field, f"a cube map of 6 N x N texels (faces +X, -X, +Y, -Y, +Z, -Z stacked vertically), got {h}x{w}",
+            file,
+            field,
+            f"a cube map of 6 N x N texels (faces +X, -X, +Y, -Y, +Z, -Z stacked vertically), got {h}x{w}",
         )
     return kg_from_stacked(checked)
 
@@ -261,7 +265,9 @@ def _check_refs(directory: Path, file: Path, refs: dict) -> None:
         target = directory / rel
         ok = target.exists() if field == "cameras" else target.is_file()
         if not ok:
-            raise SceneError(file, field, f"an existing {'path' if field == 'cameras' else 'file'}: {target} does not exist")
+            raise SceneError(
+                file, field, f"an existing {'path' if field == 'cameras' else 'file'}: {target} does not exist"
+            )
 
 
 def load_scene(directory) -> Scene:
@@ -300,12 +306,18 @@ def _load_v2(directory: Path, doc: dict) -> Scene:
     materials = {}
     for name, rels in doc["materials"].items():
         files = {m: directory / rel for m, rel in rels.items()}
-        materials[name] = validate_atlas({m: read_image(path, finite=False) for m, path in files.items()}, files,
-                                         f"materials.{name}")
+        materials[name] = validate_atlas(
+            {m: read_image(path, finite=False) for m, path in files.items()}, files, f"materials.{name}"
+        )
     objects = [
-        SceneObject(name=entry["name"], mesh=meshes[entry["mesh"]], material=entry["material"],
-                    transform=check_transform(entry.get("transform", np.eye(4).tolist()), file, f"objects[{k}].transform"),
-                    instance_id=entry.get("instance_id"), emission_sides=entry.get("emission_sides", "two"))
+        SceneObject(
+            name=entry["name"],
+            mesh=meshes[entry["mesh"]],
+            material=entry["material"],
+            transform=check_transform(entry.get("transform", np.eye(4).tolist()), file, f"objects[{k}].transform"),
+            instance_id=entry.get("instance_id"),
+            emission_sides=entry.get("emission_sides", "two"),
+        )
         for k, entry in enumerate(doc["objects"])
     ]
     validate_objects(objects, materials, file)
@@ -343,8 +355,14 @@ def write_scene(directory, scene: Scene, metadata: dict | None = None) -> None:
         "mesh": DEFAULT_FILES["mesh"],
         "maps": dict(DEFAULT_FILES["maps"]),
     }
-    _write_dir(directory, scene, doc, metadata, {DEFAULT_FILES["mesh"]: scene.mesh},
-               {DEFAULT_FILES["maps"][name]: disk_maps[name] for name in MAP_NAMES})
+    _write_dir(
+        directory,
+        scene,
+        doc,
+        metadata,
+        {DEFAULT_FILES["mesh"]: scene.mesh},
+        {DEFAULT_FILES["maps"][name]: disk_maps[name] for name in MAP_NAMES},
+    )
 
 
 def _write_dir(directory: Path, scene: Scene, doc: dict, metadata, meshes: dict, images: dict) -> None:
@@ -373,15 +391,20 @@ def _write_v2(directory: Path, scene: Scene, metadata) -> None:
     images, mesh_files, entries = {}, {}, []
     for name, atlas in materials.items():
         rels = {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS}
-        validate_atlas({m: getattr(atlas, m) for m in ATLAS_MAPS}, {m: directory / r for m, r in rels.items()},
-                       f"materials.{name}")
+        validate_atlas(
+            {m: getattr(atlas, m) for m in ATLAS_MAPS}, {m: directory / r for m, r in rels.items()}, f"materials.{name}"
+        )
         images.update({rels[m]: getattr(atlas, m) for m in ATLAS_MAPS})
     for obj in scene.objects:
         if id(obj.mesh) not in mesh_files:  # a mesh shared by objects is written once
             mesh_files[id(obj.mesh)] = (f"meshes/{obj.name}.ply", obj.mesh)
             validate_mesh(obj.mesh, directory / mesh_files[id(obj.mesh)][0], require_uvs=True)
-        entry = {"name": obj.name, "mesh": mesh_files[id(obj.mesh)][0],
-                 "transform": np.asarray(obj.transform, np.float64).tolist(), "material": obj.material}
+        entry = {
+            "name": obj.name,
+            "mesh": mesh_files[id(obj.mesh)][0],
+            "transform": np.asarray(obj.transform, np.float64).tolist(),
+            "material": obj.material,
+        }
         if obj.instance_id is not None:
             entry["instance_id"] = int(obj.instance_id)
         entries.append({**entry, "emission_sides": obj.emission_sides})
@@ -390,7 +413,13 @@ def _write_v2(directory: Path, scene: Scene, metadata) -> None:
     validate_kg(images[V2_KG], kg_file, "kg")
     for cam in scene.cameras:
         check_camera(cam, directory / DEFAULT_FILES["cameras"])
-    doc = {"format": FORMAT, "version": 2, "units": "meters", "up": "+Y", "objects": entries,
-           "materials": {name: {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS} for name in materials},
-           "kg": V2_KG}
+    doc = {
+        "format": FORMAT,
+        "version": 2,
+        "units": "meters",
+        "up": "+Y",
+        "objects": entries,
+        "materials": {name: {m: f"materials/{name}/{m}.exr" for m in ATLAS_MAPS} for name in materials},
+        "kg": V2_KG,
+    }
     _write_dir(directory, scene, doc, metadata, dict(mesh_files.values()), images)

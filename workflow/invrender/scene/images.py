@@ -78,9 +78,7 @@ def _read_exr(path: Path) -> np.ndarray:
     elif len(names) == 1:
         order = list(names)
     else:
-        raise SceneError(
-            path, "channels", f"R,G,B or Y or a single channel, got {','.join(sorted(names))}"
-        )
+        raise SceneError(path, "channels", f"R,G,B or Y or a single channel, got {','.join(sorted(names))}")
     planes = [np.asarray(channels[name], dtype=np.float32) for name in order]
     shapes = {p.shape for p in planes}
     if len(shapes) != 1 or len(planes[0].shape) != 2:
@@ -95,8 +93,11 @@ def check_finite(image: np.ndarray, path) -> np.ndarray:
     if bad.any():
         y, x, c = (int(i) for i in np.argwhere(bad.reshape(image.shape[0], image.shape[1], -1))[0])
         value = image.reshape(image.shape[0], image.shape[1], -1)[y, x, c]
-        raise SceneError(path, f"pixel (x {x}, y {y}) channel {c}",
-                         f"finite values, got {value} ({int(bad.sum())} non-finite values)")
+        raise SceneError(
+            path,
+            f"pixel (x {x}, y {y}) channel {c}",
+            f"finite values, got {value} ({int(bad.sum())} non-finite values)",
+        )
     return image
 
 

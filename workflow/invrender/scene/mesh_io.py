@@ -69,8 +69,9 @@ def validate_mesh(mesh: Mesh, path, require_uvs: bool = True) -> None:
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise SceneError(
-            path, f"vertex {i} x,y,z", f"finite coordinates, got {positions[i].tolist()} "
-            f"({int(bad.sum())} non-finite vertices)"
+            path,
+            f"vertex {i} x,y,z",
+            f"finite coordinates, got {positions[i].tolist()} ({int(bad.sum())} non-finite vertices)",
         )
     check_extent(positions, path)
     faces = np.asarray(mesh.faces)
@@ -82,7 +83,8 @@ def validate_mesh(mesh: Mesh, path, require_uvs: bool = True) -> None:
     if out.any():
         i = int(np.flatnonzero(out.any(axis=1))[0])
         raise SceneError(
-            path, f"face {i} vertex_indices",
+            path,
+            f"face {i} vertex_indices",
             f"indices in [0, {len(positions)}) (the vertex count), got {faces[i].tolist()}",
         )
     if mesh.uvs is None:
@@ -113,13 +115,21 @@ def check_extent(positions, path) -> None:
         outside = np.linalg.norm(np.maximum(b_lo - p, 0) + np.maximum(p - b_hi, 0), axis=1)
         i = int(np.argmax(outside))
         if outside[i] > OUTLIER_DIAGONALS * bulk:
-            raise SceneError(path, f"vertex {i} x,y,z", f"a vertex near the others, got {p[i].tolist()}, "
-                             f"{outside[i]:.3g} m outside the box of 98% of the vertices (diagonal {bulk:.3g} m)")
+            raise SceneError(
+                path,
+                f"vertex {i} x,y,z",
+                f"a vertex near the others, got {p[i].tolist()}, "
+                f"{outside[i]:.3g} m outside the box of 98% of the vertices (diagonal {bulk:.3g} m)",
+            )
     if not MIN_DIAGONAL_M <= diagonal <= MAX_DIAGONAL_M:
         far = int(np.argmax(np.linalg.norm(p - np.median(p, axis=0), axis=1)))
-        raise SceneError(path, "vertex x,y,z (extent)", f"a bounding-box diagonal between {MIN_DIAGONAL_M:g} m "
-                         f"and {MAX_DIAGONAL_M:g} m (meters), got {diagonal:.3g} m; farthest vertex {far} at "
-                         f"{p[far].tolist()}")
+        raise SceneError(
+            path,
+            "vertex x,y,z (extent)",
+            f"a bounding-box diagonal between {MIN_DIAGONAL_M:g} m "
+            f"and {MAX_DIAGONAL_M:g} m (meters), got {diagonal:.3g} m; farthest vertex {far} at "
+            f"{p[far].tolist()}",
+        )
 
 
 def read_triangles(path) -> Mesh:
@@ -315,7 +325,9 @@ def _check_obj_indices(path, corners, count: int, starts, kind: str) -> None:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         face = int(np.searchsorted(starts, k, side="right") - 1)
-        raise SceneError(path, f"face {face} {kind}", f"indices in [1, {count}] (the {kind} count), got {corners[k] + 1}")
+        raise SceneError(
+            path, f"face {face} {kind}", f"indices in [1, {count}] (the {kind} count), got {corners[k] + 1}"
+        )
 
 
 def obj_statements(path):
@@ -392,9 +404,12 @@ def _parse_obj(path) -> dict:
     return {
         "positions": np.asarray(positions, np.float64).reshape(-1, 3),
         "texcoords": np.asarray(texcoords, np.float64).reshape(-1, 2),
-        "corners_v": np.asarray(corners_v, np.int64), "corners_vt": np.asarray(corners_vt, np.int64),
+        "corners_v": np.asarray(corners_v, np.int64),
+        "corners_vt": np.asarray(corners_vt, np.int64),
         "polygon_sizes": np.asarray(polygon_sizes, np.int64),
-        "polygon_material": np.asarray(polygon_material, np.int64), "materials": materials, "mtllibs": mtllibs,
+        "polygon_material": np.asarray(polygon_material, np.int64),
+        "materials": materials,
+        "mtllibs": mtllibs,
     }
 
 
@@ -414,13 +429,15 @@ def _obj_mesh(parsed: dict, path, require_uvs: bool, keep: np.ndarray | None = N
         if require_uvs:
             raise SceneError(path, MISSING_UVS, "vt lines and f v/vt (every face corner with a vt index)")
         used, inverse = np.unique(corners_v[tri], return_inverse=True)
-        return Mesh(positions=positions[used].astype(np.float32), faces=inverse.reshape(-1, 3).astype(np.int32),
-                    uvs=None)
+        return Mesh(
+            positions=positions[used].astype(np.float32), faces=inverse.reshape(-1, 3).astype(np.int32), uvs=None
+        )
     in_part = np.zeros(len(corners_vt), bool)
     in_part[used_corners] = True
     _check_obj_indices(path, np.where(in_part, corners_vt, 0), len(texcoords), starts, "vt")
-    pairs, inverse = np.unique(np.stack([corners_v[tri].ravel(), corners_vt[tri].ravel()], axis=1), axis=0,
-                               return_inverse=True)
+    pairs, inverse = np.unique(
+        np.stack([corners_v[tri].ravel(), corners_vt[tri].ravel()], axis=1), axis=0, return_inverse=True
+    )
     return Mesh(
         positions=positions[pairs[:, 0]].astype(np.float32),
         faces=inverse.reshape(-1, 3).astype(np.int32),

@@ -28,8 +28,17 @@ import numpy as np
 from .mesh_io import validate_mesh
 from .types import ATLAS_MAPS, EMISSION_SIDES, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 
-__all__ = ["PADDING", "Rect", "Packing", "layout", "pack_scene", "flatten", "object_transform", "check_transform",
-           "validate_objects"]
+__all__ = [
+    "PADDING",
+    "Rect",
+    "Packing",
+    "layout",
+    "pack_scene",
+    "flatten",
+    "object_transform",
+    "check_transform",
+    "validate_objects",
+]
 
 PADDING = 1  # texels around each rectangle: a lookup is off by far less than one texel
 
@@ -95,7 +104,7 @@ def layout(shapes: dict[str, tuple[int, int]], padding: int = PADDING) -> Packin
     (ties in the given order), shelves as wide as the widest cell or the square root of the total
     area, whichever is more. One set alone is the whole atlas, without padding."""
     if len(shapes) == 1:
-        (name, (h, w)), = shapes.items()
+        ((name, (h, w)),) = shapes.items()
         return Packing((int(h), int(w)), {name: Rect(0, 0, int(h), int(w))}, 0)
     cells = {name: (int(h) + 2 * padding, int(w) + 2 * padding) for name, (h, w) in shapes.items()}
     width = max(max(w for _, w in cells.values()), int(np.ceil(np.sqrt(sum(h * w for h, w in cells.values())))))
@@ -120,7 +129,9 @@ def check_transform(transform, file, field: str) -> np.ndarray:
     if T.shape != (4, 4) or not np.isfinite(T).all() or not np.array_equal(T[3], [0, 0, 0, 1]):
         raise SceneError(file, field, "a row-major 4x4 matrix [[A, t], [0, 0, 0, 1]] of finite numbers")
     if not np.linalg.det(T[:3, :3]) > 0:
-        raise SceneError(file, field, f"a transform that keeps orientation (det > 0), got det {np.linalg.det(T[:3, :3]):g}")
+        raise SceneError(
+            file, field, f"a transform that keeps orientation (det > 0), got det {np.linalg.det(T[:3, :3]):g}"
+        )
     return T
 
 
@@ -134,7 +145,9 @@ def validate_objects(objects: list[SceneObject], materials, file) -> None:
             raise SceneError(file, f"{field}.name", f"a name no other object has, got {obj.name!r} twice")
         seen.add(obj.name)
         if obj.material not in materials:
-            raise SceneError(file, f"{field}.material", f"one of the material sets {sorted(materials)}, got {obj.material!r}")
+            raise SceneError(
+                file, f"{field}.material", f"one of the material sets {sorted(materials)}, got {obj.material!r}"
+            )
         if obj.emission_sides not in EMISSION_SIDES:
             raise SceneError(file, f"{field}.emission_sides", f"one of {EMISSION_SIDES}, got {obj.emission_sides!r}")
         check_transform(obj.transform, file, f"{field}.transform")
@@ -162,21 +175,40 @@ def flatten(objects: list[SceneObject], packing: Packing) -> Mesh:
         if obj.instance_id is not None:
             ids.append(np.full(count, obj.instance_id, np.int32))
         else:
-            ids.append(np.zeros(count, np.int32) if mesh.instance_ids is None else np.asarray(mesh.instance_ids, np.int32))
+            ids.append(
+                np.zeros(count, np.int32) if mesh.instance_ids is None else np.asarray(mesh.instance_ids, np.int32)
+            )
         sides.append(np.full(count, obj.emission_sides == "one"))
         offset += len(mesh.positions)
     one_sided = np.concatenate(sides)
-    return Mesh(positions=np.concatenate(positions), faces=np.concatenate(faces).astype(np.int32),
-                uvs=np.concatenate(uvs), instance_ids=np.concatenate(ids), one_sided=one_sided if one_sided.any() else None)
+    return Mesh(
+        positions=np.concatenate(positions),
+        faces=np.concatenate(faces).astype(np.int32),
+        uvs=np.concatenate(uvs),
+        instance_ids=np.concatenate(ids),
+        one_sided=one_sided if one_sided.any() else None,
+    )
 
 
-def pack_scene(objects: list[SceneObject], materials: dict[str, Atlas], kg: np.ndarray, cameras=(),
-               path=None, padding: int = PADDING) -> Scene:
+def pack_scene(
+    objects: list[SceneObject],
+    materials: dict[str, Atlas],
+    kg: np.ndarray,
+    cameras=(),
+    path=None,
+    padding: int = PADDING,
+) -> Scene:
     """A v2 scene: its objects, and the mesh and maps the renderer reads (module docstring).
     `materials` maps each set's name to its atlas (any size); `kg` is the scene's (6, N, N, 3) sky."""
     validate_objects(objects, materials, "(scene in memory)")
     packing = layout({name: atlas.atlas_shape for name, atlas in materials.items()}, padding)
     atlas = packing.pack_atlas(materials)
     maps = Maps(**{m: getattr(atlas, m) for m in ATLAS_MAPS}, kg=np.asarray(kg, np.float32))
-    return Scene(mesh=flatten(objects, packing), maps=maps, cameras=list(cameras), path=path,
-                 objects=list(objects), packing=packing)
+    return Scene(
+        mesh=flatten(objects, packing),
+        maps=maps,
+        cameras=list(cameras),
+        path=path,
+        objects=list(objects),
+        packing=packing,
+    )

@@ -71,5 +71,7 @@ def write_poses(path, doc: dict) -> None:
 def placements(doc, mesh: Mesh, material: str, name: str = "object", where="poses.json") -> list[SceneObject]:
     """The registered copies of a poses document as v2 objects: `mesh` (in the object frame)
     placed at each T_obj2world with the instance id as its own, all sharing `material`."""
-    return [SceneObject(f"{name}_{pose['instance_id']}", mesh, material, pose["T"], instance_id=pose["instance_id"])
-            for pose in validate_poses(doc, where)]
+    return [
+        SceneObject(f"{name}_{pose['instance_id']}", mesh, material, pose["T"], instance_id=pose["instance_id"])
+        for pose in validate_poses(doc, where)
+    ]

@@ -43,7 +43,9 @@ class Mesh:
     faces: np.ndarray  # (F, 3) int32, counter-clockwise seen from the front
     uvs: np.ndarray  # (V, 2) float32 atlas coordinates in [0, 1], v up
     instance_ids: np.ndarray | None = None  # (F,) int32, 0 = no instance
-    one_sided: np.ndarray | None = None  # (F,) bool: emits only on its front (counter-clockwise) side; None = all two-sided
+    one_sided: np.ndarray | None = (
+        None  # (F,) bool: emits only on its front (counter-clockwise) side; None = all two-sided
+    )
 
     @property
     def triangle_count(self) -> int:

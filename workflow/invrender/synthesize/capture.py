@@ -21,8 +21,8 @@ The directory is built beside ``out_dir`` and renamed into place only when compl
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -30,9 +30,9 @@ from tqdm import tqdm
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import write_colmap
 from ..scene.format import write_scene
-from ..scene.poses import write_poses
 from ..scene.images import write_exr, write_mask, write_png_preview
 from ..scene.mesh_io import write_ply
+from ..scene.poses import write_poses
 from ..scene.types import Mesh, Scene
 
 __all__ = ["write_capture", "AOV_SHAPES"]
@@ -84,7 +84,9 @@ def write_capture(
             for key, tail in AOV_SHAPES.items():
                 got = np.shape(out[key])
                 if got != (cam.height, cam.width, *tail):
-                    raise RuntimeError(f"renderer: {key} of {cam.name} has shape {got}, expected {(cam.height, cam.width, *tail)}")
+                    raise RuntimeError(
+                        f"renderer: {key} of {cam.name} has shape {got}, expected {(cam.height, cam.width, *tail)}"
+                    )
             radiance = np.asarray(out["radiance"], np.float32)
             if not np.all(np.isfinite(radiance)):
                 raise RuntimeError(f"renderer: non-finite radiance in {cam.name}")

@@ -72,7 +72,10 @@ def build_object(config: dict | None = None):
 def _label(radius: float, height: float):
     """The printed label: red, a white band, a yellow disc, a blue L and a barcode-like patch,
     laid out over angle phi (from +X towards -Z) and height y: no rotational symmetry."""
-    red, white, yellow, blue, black = (np.array(c) for c in ([0.72, 0.08, 0.06], [0.9, 0.9, 0.88], [0.95, 0.78, 0.1], [0.1, 0.2, 0.65], [0.05, 0.05, 0.05]))
+    red, white, yellow, blue, black = (
+        np.array(c)
+        for c in ([0.72, 0.08, 0.06], [0.9, 0.9, 0.88], [0.95, 0.78, 0.1], [0.1, 0.2, 0.65], [0.05, 0.05, 0.05])
+    )
 
     def shader(pos, nrm):
         phi = np.mod(np.arctan2(-pos[:, 2], pos[:, 0]), 2 * np.pi)
@@ -128,11 +131,13 @@ def _tiles(tile: float, rng: np.random.Generator):
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     """Uniform on SO(3): a normalised Gaussian quaternion."""
     w, x, y, z = (q := rng.normal(size=4)) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _place(obj_positions, camera, cfg, rng) -> list[np.ndarray]:
@@ -189,7 +194,9 @@ def make_duplicates(config: dict | None = None) -> tuple[Scene, dict]:
     area_obj = triangle_areas(obj.positions, obj.faces).sum()
     scale = np.sqrt(share / (1 - share) * area_floor / area_obj)
     unwrap_positions = np.where(is_obj_vertex[:, None], positions * scale, positions)
-    atlas = unwrap(unwrap_positions, faces, resolution=int(cfg["atlas_resolution"]), padding=int(cfg["atlas_padding"]), groups=part)
+    atlas = unwrap(
+        unwrap_positions, faces, resolution=int(cfg["atlas_resolution"]), padding=int(cfg["atlas_padding"]), groups=part
+    )
     template = Mesh(positions=positions[atlas.vertex_map].astype(np.float32), faces=atlas.faces, uvs=atlas.uvs)
 
     materials = {
@@ -227,8 +234,13 @@ def make_duplicates(config: dict | None = None) -> tuple[Scene, dict]:
         uv_list.append(obj_uvs)
         inst.append(np.full(len(obj_faces), i, np.int32))
         start_face = sum(len(f) for f in face_list[:-1])
-        ranges.append({"instance_id": i, "faces": [start_face, start_face + len(obj_faces)],
-                       "vertices": [offset, offset + len(obj_pos)]})
+        ranges.append(
+            {
+                "instance_id": i,
+                "faces": [start_face, start_face + len(obj_faces)],
+                "vertices": [offset, offset + len(obj_pos)],
+            }
+        )
         offset += len(obj_pos)
     mesh = Mesh(
         positions=np.concatenate(pos_list).astype(np.float32),
@@ -246,13 +258,21 @@ def make_duplicates(config: dict | None = None) -> tuple[Scene, dict]:
         "seed": int(cfg["seed"]),
         "config": cfg,
         "triangle_count": int(len(mesh.faces)),
-        "atlas": {"height": atlas.height, "width": atlas.width, "padding": int(cfg["atlas_padding"]),
-                  "coverage": float(texels.mask.mean()), "object_unwrap_scale": float(scale)},
+        "atlas": {
+            "height": atlas.height,
+            "width": atlas.width,
+            "padding": int(cfg["atlas_padding"]),
+            "coverage": float(texels.mask.mean()),
+            "object_unwrap_scale": float(scale),
+        },
         "floor": {"faces": [0, len(floor_faces)], "vertices": [0, len(floor_pos)]},
         "object": {
             "vertex_count": int(len(obj_pos)),
             "face_count": int(len(obj_faces)),
-            "parts": [{"name": name, "faces": [int(obj_bounds[k]), int(obj_bounds[k + 1])]} for k, name in enumerate(CYLINDER_PARTS)],
+            "parts": [
+                {"name": name, "faces": [int(obj_bounds[k]), int(obj_bounds[k + 1])]}
+                for k, name in enumerate(CYLINDER_PARTS)
+            ],
         },
         "copies": ranges,
         "poses": {

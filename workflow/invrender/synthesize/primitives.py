@@ -11,7 +11,8 @@ vertices there: meshes stitched from them have no cracks and no T-junctions.
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,11 +40,11 @@ class Primitive(NamedTuple):
     faces: np.ndarray  # (F, 3) int32
     part: np.ndarray  # (F,) int32
 
-    def flipped(self) -> "Primitive":
+    def flipped(self) -> Primitive:
         """The same surface seen from the other side (winding reversed)."""
         return Primitive(self.positions, self.faces[:, ::-1].copy(), self.part)
 
-    def transformed(self, matrix) -> "Primitive":
+    def transformed(self, matrix) -> Primitive:
         """Apply a 4 x 4 affine transform (p' = M [p, 1]); winding flips if it mirrors."""
         m = np.asarray(matrix, np.float64)
         pos = self.positions @ m[:3, :3].T + m[:3, 3]
@@ -145,9 +146,7 @@ def box(lo, hi, cell: float | None = None, omit=(), extra_breaks=((), (), ())) -
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     if np.any(hi <= lo):
         raise ValueError(f"box: hi {hi} must exceed lo {lo} on every axis")
-    breaks = [
-        subdivide_breaks(lo[k], hi[k], cell if cell else np.inf, extra_breaks[k]) for k in range(3)
-    ]
+    breaks = [subdivide_breaks(lo[k], hi[k], cell if cell else np.inf, extra_breaks[k]) for k in range(3)]
     pieces = []
     for side, name in enumerate(BOX_SIDES):
         if name in omit:

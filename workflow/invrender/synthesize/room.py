@@ -18,8 +18,8 @@ This module also holds what the other synthetic scene (``duplicates.py``) shares
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -377,7 +377,9 @@ def _room_geometry(cfg: dict, rng: np.random.Generator):
         materials[4 + i] = Material(kd=0.0, ks=0.0, ka=cfg["emitter_ka"], ke=ke)
 
     # Furniture: one part and one instance id per piece.
-    palette = np.array([[0.55, 0.22, 0.15], [0.20, 0.35, 0.55], [0.30, 0.50, 0.25], [0.65, 0.55, 0.25], [0.45, 0.45, 0.48]])
+    palette = np.array(
+        [[0.55, 0.22, 0.15], [0.20, 0.35, 0.55], [0.30, 0.50, 0.25], [0.65, 0.55, 0.25], [0.45, 0.45, 0.48]]
+    )
     colors = palette[rng.permutation(len(palette))]
     jitter = float(cfg["furniture_jitter"])
     for k, piece in enumerate(cfg["furniture"]):
@@ -388,8 +390,10 @@ def _room_geometry(cfg: dict, rng: np.random.Generator):
         half = np.array([piece["size"][0], piece["size"][2]], np.float64) / 2
         room_lo, room_hi = lo[[0, 2]] + half + WALL_CLEARANCE, hi[[0, 2]] - half - WALL_CLEARANCE
         if np.any(centre < room_lo) or np.any(centre > room_hi) or not 0 < piece["size"][1] < hi[1]:
-            raise ValueError(f"config.furniture[{k}] ({piece['name']}): expected it inside the room, "
-                             f"{WALL_CLEARANCE} m from the walls")
+            raise ValueError(
+                f"config.furniture[{k}] ({piece['name']}): expected it inside the room, "
+                f"{WALL_CLEARANCE} m from the walls"
+            )
         # The seeded shift never pushes a piece into a wall.
         cx, cz = np.clip(centre + rng.uniform(-jitter, jitter, 2), room_lo, room_hi)
         fx, fy, fz = map(float, piece["size"])
@@ -452,7 +456,9 @@ def make_room(config: dict | None = None) -> tuple[Scene, dict]:
     # Faces grouped by part, so each part is one contiguous face range.
     order = np.argsort(prim.part, kind="stable")
     faces, part = prim.faces[order], prim.part[order]
-    atlas = unwrap(prim.positions, faces, resolution=int(cfg["atlas_resolution"]), padding=int(cfg["atlas_padding"]), groups=part)
+    atlas = unwrap(
+        prim.positions, faces, resolution=int(cfg["atlas_resolution"]), padding=int(cfg["atlas_padding"]), groups=part
+    )
     mesh = Mesh(
         positions=atlas.positions.astype(np.float32),
         faces=atlas.faces,
@@ -472,8 +478,12 @@ def make_room(config: dict | None = None) -> tuple[Scene, dict]:
         "seed": int(cfg["seed"]),
         "config": cfg,
         "triangle_count": int(len(faces)),
-        "atlas": {"height": atlas.height, "width": atlas.width, "padding": int(cfg["atlas_padding"]),
-                  "coverage": float(texels.mask.mean())},
+        "atlas": {
+            "height": atlas.height,
+            "width": atlas.width,
+            "padding": int(cfg["atlas_padding"]),
+            "coverage": float(texels.mask.mean()),
+        },
         "parts": [
             {
                 "name": name,
@@ -486,6 +496,9 @@ def make_room(config: dict | None = None) -> tuple[Scene, dict]:
         ],
         "instances": [{"instance_id": 0, "name": "room"}]
         + [{"instance_id": k + 1, "name": f["name"]} for k, f in enumerate(cfg["furniture"])],
-        "room_bounds": [[-cfg["size"][0] / 2, 0.0, -cfg["size"][2] / 2], [cfg["size"][0] / 2, cfg["size"][1], cfg["size"][2] / 2]],
+        "room_bounds": [
+            [-cfg["size"][0] / 2, 0.0, -cfg["size"][2] / 2],
+            [cfg["size"][0] / 2, cfg["size"][1], cfg["size"][2] / 2],
+        ],
     }
     return scene, metadata

@@ -12,8 +12,15 @@ from .room import make_room
 KINDS = {"room": make_room, "duplicates": make_duplicates}
 
 
-def run(kind: str, out_dir, config: dict | None = None, spp: int = 64, seed: int | None = None,
-        device: str | None = None, renderer_factory=None) -> dict:
+def run(
+    kind: str,
+    out_dir,
+    config: dict | None = None,
+    spp: int = 64,
+    seed: int | None = None,
+    device: str | None = None,
+    renderer_factory=None,
+) -> dict:
     """Build the ``kind`` scene ("room" or "duplicates") and write its capture to ``out_dir``.
 
     ``seed`` (if given) overrides ``config["seed"]``; the same seed drives the scene and the
