@@ -59,10 +59,16 @@ def _pack_options(texels_per_unit: float, resolution: int, padding: int) -> xatl
     return pack
 
 
-def _chart_scale(positions: np.ndarray) -> np.float32:
-    """The power of two that brings the bounding-box diagonal to at least 1 (1 if it is)."""
+class NoCharts(RuntimeError):
+    """xatlas charted nothing (every face below its degeneracy threshold, or no atlas)."""
+
+
+def _chart_scale(positions: np.ndarray) -> float:
+    """The power of two that brings the bounding-box diagonal to at least 1 (1 if it is); a
+    Python float, so that it scales float32 positions exactly and leaves float64 sums float64
+    (a numpy float32 would round the area to float32 under NumPy 2's promotion rules)."""
     diagonal = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0))) if len(positions) else 1.0
-    return np.float32(2.0 ** max(0, int(np.ceil(-np.log2(diagonal))))) if 0 < diagonal < 1 else np.float32(1)
+    return 2.0 ** max(0, int(np.ceil(-np.log2(diagonal)))) if 0 < diagonal < 1 else 1.0
 
 
 def _chart(meshes, texels_per_unit: float, padding: int, chart_options):
@@ -72,7 +78,7 @@ def _chart(meshes, texels_per_unit: float, padding: int, chart_options):
         atlas.add_mesh(positions, faces)
     atlas.generate(chart_options or xatlas.ChartOptions(), _pack_options(texels_per_unit, 0, padding))
     if atlas.atlas_count != 1:
-        raise RuntimeError(f"xatlas produced {atlas.atlas_count} atlases, expected 1")
+        raise NoCharts(f"xatlas produced {atlas.atlas_count} atlases, expected 1")
     return atlas
 
 
@@ -144,28 +150,19 @@ def _unwrap(
         verts, local = np.unique(faces[face_idx], return_inverse=True)
         parts.append((face_idx, verts, local.reshape(-1, 3).astype(np.uint32)))
     # xatlas takes faces below about 1e-7 of area as degenerate: a mesh a few millimetres across
-    # gave no atlas at all. It charts a copy scaled by a power of two (exact) to at least 1 m;
-    # densities are per unit of that copy. Meshes of 1 m and more are charted as they are.
-    k = _chart_scale(positions)
-    meshes = [(positions[verts] * k, local) for _, verts, local in parts]
-
-    if texels_per_meter is not None:
-        atlas = _chart(meshes, texels_per_meter / k, padding, chart_options)
-        results = [atlas[i] for i in range(len(parts))]
-    else:
-        resolution = int(resolution)
-        area = float(triangle_areas(positions, faces).sum()) * k * k
-        if area <= 0:
-            raise ValueError("unwrap: the mesh has zero area")
-        density = resolution / np.sqrt(area)  # every texel used: an upper bound
-        charted = _chart(meshes, density, padding, chart_options)
-        scale = np.array([charted.width, charted.height], np.float32) / np.float32(density)
-        charts = [charted[i] for i in range(len(parts))]
-        uv_meshes = [(np.ascontiguousarray(uv * scale, np.float32), ind) for _, ind, uv in charts]
-        atlas = _densest_packing(uv_meshes, density, resolution, padding, search_steps)
-        results = []
-        for (vm0, _, _), (vm1, ind, uv) in zip(charts, (atlas[i] for i in range(len(parts)))):
-            results.append((vm0[vm1.astype(np.int64)], ind, uv))
+    # gave no atlas at all. Then it charts a copy scaled by a power of two (exact) to at least
+    # 1 m, densities per unit of that copy. Meshes it charts as they are keep their exact atlas.
+    try:
+        atlas, results = _chart_parts(
+            positions, faces, parts, 1.0, texels_per_meter, resolution, padding, chart_options, search_steps
+        )
+    except NoCharts:
+        k = _chart_scale(positions)
+        if k == 1:
+            raise
+        atlas, results = _chart_parts(
+            positions, faces, parts, k, texels_per_meter, resolution, padding, chart_options, search_steps
+        )
 
     width, height = int(atlas.width), int(atlas.height)
     out_faces = np.empty((len(faces), 3), np.int64)
@@ -187,6 +184,31 @@ def _unwrap(
         height=height,
         width=width,
     )
+
+
+def _chart_parts(positions, faces, parts, k, texels_per_meter, resolution, padding, chart_options, search_steps):
+    """(xatlas atlas, [(vertex mapping, indices, uvs)] per part) of the parts scaled by k."""
+    meshes = [(positions[verts] * k, local) for _, verts, local in parts]
+
+    if texels_per_meter is not None:
+        atlas = _chart(meshes, texels_per_meter / k, padding, chart_options)
+        results = [atlas[i] for i in range(len(parts))]
+    else:
+        resolution = int(resolution)
+        area = float(triangle_areas(positions, faces).sum()) * k * k
+        if area <= 0:
+            raise ValueError("unwrap: the mesh has zero area")
+        density = resolution / np.sqrt(area)  # every texel used: an upper bound
+        charted = _chart(meshes, density, padding, chart_options)
+        scale = np.array([charted.width, charted.height], np.float32) / np.float32(density)
+        charts = [charted[i] for i in range(len(parts))]
+        uv_meshes = [(np.ascontiguousarray(uv * scale, np.float32), ind) for _, ind, uv in charts]
+        atlas = _densest_packing(uv_meshes, density, resolution, padding, search_steps)
+        results = []
+        for (vm0, _, _), (vm1, ind, uv) in zip(charts, (atlas[i] for i in range(len(parts)))):
+            results.append((vm0[vm1.astype(np.int64)], ind, uv))
+
+    return atlas, results
 
 
 def _densest_packing(uv_meshes, hi: float, resolution: int, padding: int, steps: int):
