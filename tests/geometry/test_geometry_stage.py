@@ -212,3 +212,41 @@ def test_cli_end_to_end_on_a_small_mesh(tmp_path, caplog):
     assert main(["geometry", str(bad), "--out", str(tmp_path / "nothing")]) == 2
     assert f"{bad}: (file): expected" in caplog.text
     assert not (tmp_path / "nothing").exists()
+
+
+def test_two_triangle_lamps_survive_cleaning(tmp_path):
+    """Issue 11: a captured room whose two 0.6 m ceiling panels are separate pieces of two
+    triangles each (as lamps often are). Size relative to the room decides what is a crumb, so both
+    panels come out of the geometry stage, and a crumb 2 cm across does not."""
+    from invrender.scene.mesh_io import read_mesh, write_ply
+    from invrender.scene.types import Mesh
+
+    positions, faces = _room_with_panels()
+    source = tmp_path / "room.ply"
+    write_ply(source, Mesh(positions, faces, np.zeros((len(positions), 2), np.float32)))
+    out = tmp_path / "geometry"
+    report = run(source, out, target_faces=5000, atlas_resolution=64, progress=False)
+    mesh = read_mesh(out / "mesh.ply")
+    for x0 in (1.0, 2.6):  # each panel: faces 2 cm under the ceiling, where the panel was
+        centres = mesh.positions[mesh.faces].mean(axis=1)
+        on_panel = (np.abs(centres[:, 1] - 2.98) < 1e-3) & (centres[:, 0] > x0) & (centres[:, 0] < x0 + 0.6)
+        assert on_panel.sum() >= 2, (x0, report)
+    assert not np.any(np.abs(mesh.positions[:, 1] - 1.5) < 1e-3), "the 2 cm crumb in mid-air should be removed"
+
+
+def _room_with_panels():
+    """A closed 4 x 3 x 5 m box (12 triangles), two 0.6 x 0.6 m panels 2 cm below the ceiling
+    facing down (2 triangles each), and a 2 cm crumb floating in the middle of the room."""
+    w, h, d = 4.0, 3.0, 5.0
+    corners = np.array([[x, y, z] for x in (0, w) for y in (0, h) for z in (0, d)], np.float32)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = [tri for a, b, c, e in quads for tri in ((a, b, c), (a, c, e))]
+    positions = list(corners)
+    for x0 in (1.0, 2.6):
+        base = len(positions)
+        positions += [[x0, 2.98, 2.0], [x0 + 0.6, 2.98, 2.0], [x0 + 0.6, 2.98, 2.6], [x0, 2.98, 2.6]]
+        faces += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    base = len(positions)
+    positions += [[2.0, 1.5, 2.5], [2.02, 1.5, 2.5], [2.0, 1.5, 2.52]]
+    faces += [(base, base + 1, base + 2)]
+    return np.asarray(positions, np.float32), np.asarray(faces, np.int32)

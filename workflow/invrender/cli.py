@@ -94,6 +94,8 @@ def cmd_geometry(args):
             atlas_resolution=args.atlas_resolution,
             padding=args.padding,
             poisson_depth=args.poisson_depth,
+            min_island_fraction=args.min_island_fraction,
+            min_island_faces=args.min_island_faces,
             threads=args.threads,
             what="geometry",
         )
@@ -211,6 +213,15 @@ def build_parser() -> argparse.ArgumentParser:
     size.add_argument("--atlas-resolution", type=int, default=1024, help="square atlas size in texels")
     p.add_argument("--padding", type=int, default=2, help="empty texels between charts")
     p.add_argument("--poisson-depth", type=int, default=8, help="screened Poisson octree depth (point clouds)")
+    p.add_argument(
+        "--min-island-fraction",
+        type=float,
+        default=0.01,
+        help="remove pieces smaller than this fraction of the mesh's diagonal (lamps are larger)",
+    )
+    p.add_argument(
+        "--min-island-faces", type=int, default=0, help="also remove pieces with fewer faces (0: size alone decides)"
+    )
     p.add_argument("--threads", type=int, help="Poisson threads (default: the CPUs this process may use)")
     p.set_defaults(func=cmd_geometry)
 

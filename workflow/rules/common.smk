@@ -658,7 +658,9 @@ def geometry_options(wildcards):
         size = f"--atlas-resolution {geometry['atlas_resolution']}"
     return (
         f"--target-faces {geometry['target_faces']} {size} "
-        f"--padding {geometry['padding']} --poisson-depth {geometry['poisson_depth']}"
+        f"--padding {geometry['padding']} --poisson-depth {geometry['poisson_depth']} "
+        f"--min-island-fraction {geometry['min_island_fraction']} "
+        f"--min-island-faces {geometry['min_island_faces']}"
     )
 
 

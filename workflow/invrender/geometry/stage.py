@@ -53,7 +53,7 @@ def run(
     padding: int = 2,
     poisson_depth: int = 8,
     min_island_fraction: float = 0.01,
-    min_island_faces: int = 10,
+    min_island_faces: int = 0,
     trim_spacings: float = 10.0,
     threads: int | None = None,
     log: logging.Logger = logger,
@@ -66,8 +66,9 @@ def run(
     charts are packed as densely as fits an ``atlas_resolution`` square. ``padding`` empty texels
     separate the charts. A point cloud is reconstructed with screened Poisson at
     ``poisson_depth`` and trimmed ``trim_spacings`` mean point spacings from the points (see
-    ``clean.reconstruct``). Islands below ``min_island_fraction`` of the diagonal or with fewer
-    than ``min_island_faces`` faces are removed.
+    ``clean.reconstruct``). Islands below ``min_island_fraction`` of the diagonal (and, if
+    ``min_island_faces`` > 0, with fewer faces than that) are removed: size relative to the scene
+    decides, so a lamp of two triangles survives (``clean.clean_mesh``).
     """
     source, out_dir = Path(source), Path(out_dir)
     if texels_per_meter is not None:
@@ -80,6 +81,13 @@ def run(
         require_positive("geometry --atlas-resolution", "atlas size", atlas_resolution, minimum=8)
     require_positive("geometry --target-faces", "face count", target_faces, minimum=4)
     require_positive("geometry --padding", "texels", padding, minimum=0)
+    require_positive("geometry --min-island-faces", "face count", min_island_faces, minimum=0)
+    if not 0 <= min_island_fraction < 1:
+        raise SceneError(
+            "geometry --min-island-fraction",
+            "fraction of the diagonal",
+            f"a number in [0, 1), got {min_island_fraction}",
+        )
     require_positive("geometry --poisson-depth", "octree depth", poisson_depth, minimum=1)
     timings: dict[str, float] = {}
     started = time.perf_counter()
