@@ -27,25 +27,19 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
     image = Renderer(truth, analyse(truth)).render(truth.cameras[0], spp=256, seed=1, aovs=False)["radiance"]
     write_exr(capture / "images" / "view.exr", image)
 
+    def gradients(out, *flags):
+        inputs = [
+            "--geometry",
+            str(geometry),
+            "--cameras",
+            str(capture / "sparse"),
+            "--images",
+            str(capture / "images"),
+        ]
+        return main(["gradients", *inputs, "--out", str(out), "--spp", "16", *flags])
+
     out = tmp_path / "gradients"
-    assert (
-        main(
-            [
-                "gradients",
-                "--geometry",
-                str(geometry),
-                "--cameras",
-                str(capture / "sparse"),
-                "--images",
-                str(capture / "images"),
-                "--out",
-                str(out),
-                "--spp",
-                "16",
-            ]
-        )
-        == 0
-    )
+    assert gradients(out) == 0
     report = json.loads((out / "gradients.json").read_text())
     assert report["rays"] == len(pixel_requests(truth.cameras[0]))
     assert all(np.isfinite(v) and v > 0 for v in report["norms"].values()), report["norms"]
@@ -57,26 +51,7 @@ def test_gradients_of_a_dark_start_ask_for_more_light(tmp_path):
 
     # MILO's float buckets: the same sums in another order
     floats = tmp_path / "buckets"
-    assert (
-        main(
-            [
-                "gradients",
-                "--geometry",
-                str(geometry),
-                "--cameras",
-                str(capture / "sparse"),
-                "--images",
-                str(capture / "images"),
-                "--out",
-                str(floats),
-                "--spp",
-                "16",
-                "--accumulation",
-                "buckets",
-            ]
-        )
-        == 0
-    )
+    assert gradients(floats, "--accumulation", "buckets") == 0
     assert json.loads((floats / "gradients.json").read_text())["accumulation"] == "buckets"
     for name in ("kd", "ke", "kg"):
         fixed, bucketed = read_image(out / f"{name}.exr"), read_image(floats / f"{name}.exr")
