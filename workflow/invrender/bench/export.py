@@ -20,10 +20,8 @@ scene, another seed) is printed beside it for scale.
 from __future__ import annotations
 
 import logging
-import os
 import tempfile
-import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +33,7 @@ from ..scene.format import load_scene, write_scene
 from ..scene.regions import classify_faces
 from ..scene.types import Maps, Scene
 from ..synthesize import make_duplicates, make_room
-from .harness import machine_info, start_run, write_report
+from .harness import run_report, start_run, write_report
 
 log = logging.getLogger("invrender.bench")
 
@@ -211,19 +209,7 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         results = {"round_trip": round_trips(root, settings.spp, dict(settings.room_config))}
         results["standard_view"] = standard_view(root, settings.spp)
         results["ggx"] = ggx_in_mitsuba(root, settings.mitsuba_spp, variant, settings.mitsuba_views)
-    machine = machine_info(device)
-    machine["load_average_start"] = load_start
-    machine["load_average_end"] = os.getloadavg()
-    report = {
-        "benchmark": "export",
-        "mode": settings.mode,
-        "mitsuba_variant": variant,
-        "settings": asdict(settings),
-        "machine": machine,
-        "seconds": time.time() - started,
-        "notes": notes,
-        **results,
-    }
+    report = run_report("export", settings, variant, notes, started, load_start, device, results)
     views = "all" if settings.mitsuba_views is None else settings.mitsuba_views
     title = (
         f"# invrender bench export ({settings.mode}; our renders {settings.spp} spp; Mitsuba {variant} "

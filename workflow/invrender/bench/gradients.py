@@ -76,13 +76,13 @@ from .harness import (
     choose_variant,
     clock,
     fit_model,
-    machine_info,
     median,
     model_time,
     next_seed_block,
     plot,
     quiet_pyopencl,
     room_scene,
+    run_report,
     time_at_rmse,
     verdict,
     write_report,
@@ -917,20 +917,9 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         )
         if note:
             notes.append(note)
-    machine = machine_info(device)
-    machine["load_average_start"] = load_start
-    machine["load_average_end"] = os.getloadavg()
-    report = {
-        "benchmark": "gradients",
-        "mode": settings.mode,
-        "mitsuba_variant": variant,
-        "accumulations": list(accumulations),
-        "settings": asdict(settings),
-        "machine": machine,
-        "seconds": time.time() - started,
-        "notes": notes,
-        **results,
-    }
+    report = run_report(
+        "gradients", settings, variant, notes, started, load_start, device, results, accumulations=list(accumulations)
+    )
 
     title = (
         f"# invrender bench gradients ({settings.mode}; Mitsuba {variant} prb; {camera.width}x{camera.height}, "

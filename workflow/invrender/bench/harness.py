@@ -18,6 +18,7 @@ import sys
 import threading
 import time
 import warnings
+from dataclasses import asdict
 from pathlib import Path
 from typing import NamedTuple
 
@@ -285,6 +286,27 @@ def plot(
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return None
+
+
+def run_report(
+    name: str, settings, variant: str, notes: list, started: float, load_start: tuple, device, results: dict, **extra
+) -> dict:
+    """The report every benchmark writes: what ran, on which machine (with the load average at
+    the start and the end, since these machines are shared), how long, the notes, the results."""
+    machine = machine_info(device)
+    machine["load_average_start"] = load_start
+    machine["load_average_end"] = os.getloadavg()
+    return {
+        "benchmark": name,
+        "mode": settings.mode,
+        "mitsuba_variant": variant,
+        **extra,
+        "settings": asdict(settings),
+        "machine": machine,
+        "seconds": time.time() - started,
+        "notes": notes,
+        **results,
+    }
 
 
 def machine_info(device=None) -> dict:

@@ -41,10 +41,8 @@ import argparse
 import json
 import logging
 import math
-import os
 import subprocess
 import sys
-import time
 import warnings
 from dataclasses import asdict, dataclass, replace
 
@@ -55,13 +53,13 @@ from .harness import (
     PeakRSS,
     clock,
     fit_model,
-    machine_info,
     median,
     model_time,
     next_seed_block,
     plot,
     quiet_pyopencl,
     room_scene,
+    run_report,
     start_run,
     time_at_rmse,
     verdict,
@@ -941,19 +939,7 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
     note = plot(results["curves"], results["equal_rmse"], out / "render_rmse_vs_time.png")
     if note:
         notes.append(note)
-    machine = machine_info(device)
-    machine["load_average_start"] = load_start
-    machine["load_average_end"] = os.getloadavg()
-    report = {
-        "benchmark": "render",
-        "mode": settings.mode,
-        "mitsuba_variant": variant,
-        "settings": asdict(settings),
-        "machine": machine,
-        "seconds": time.time() - started,
-        "notes": notes,
-        **results,
-    }
+    report = run_report("render", settings, variant, notes, started, load_start, device, results)
 
     title = (
         f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
