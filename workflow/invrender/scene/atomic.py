@@ -38,7 +38,7 @@ from pathlib import Path
 
 from .types import SceneError
 
-__all__ = ["atomic_path", "atomic_dir", "check_output", "MARKER"]
+__all__ = ["atomic_path", "atomic_dir", "check_output", "claim_dir", "MARKER"]
 
 MARKER = ".invrender-output"  # inside every directory atomic_dir writes: its kind, one line
 
@@ -209,6 +209,17 @@ def _signals_held():
                 handler(pending[0], None)
             elif handler == signal.SIG_DFL:
                 signal.raise_signal(pending[0])
+
+
+def claim_dir(path, kind: str) -> Path:
+    """A directory a long-running stage fills file by file (each file with ``atomic_path``), so
+    that a resumed run finds what the killed one left: checked as ``check_output`` does, then made
+    and marked as ``kind``'s."""
+    path = check_output(path, kind)
+    path.mkdir(parents=True, exist_ok=True)
+    if _kind_of(path) != kind:
+        (path / MARKER).write_text(kind + "\n", encoding="utf-8")
+    return path
 
 
 @contextmanager

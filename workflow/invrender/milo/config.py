@@ -1,0 +1,135 @@
+"""Training settings: three presets, a user's overrides on top, and the hash that ties a
+checkpoint to the settings it was made with.
+
+`paper` is section 3.5 as written (three 16-layer 1024-wide MLPs, 2000 iterations of 65,536
+rays at 256 spp and 10 bounces: hours on two GPUs); `cpu` is sized for a 2-core machine and the
+benchmark room; `demo` trains the embedded demo room in about a minute. `template: false` is the
+ablation of Fig. 12: two plain MLPs, no template, no category or texture loss.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+from ..scene.types import SceneError
+
+_COMMON = {
+    "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
+    "materials": 64,  # Q, the template's materials
+    "emitters": 1,  # S, its light-emitting materials (one window material besides)
+    "light_logit_start": 4.0,  # the emitting and window materials' logits start this much lower
+    "levels_coarse": 10,  # L of gamma_c (MLP 1, the material probabilities)
+    "levels_fine": 12,  # L of gamma_f (MLP 2, the detail texture)
+    "levels_sky": 6,  # L of the sky directions' encoding (MLP 3)
+    "leaky_slope": 0.01,
+    "lr_mlp": 1e-3,  # AMSGrad
+    "lr_template": 1e-2,  # SGD with Nesterov momentum
+    "momentum": 0.9,
+    "decay": 0.3,  # both learning rates times this ...
+    "decay_at": [0.2, 0.4],  # ... at these fractions of the iterations
+    "alpha": 1.0,  # Eq. 11: image
+    "beta": 0.003,  # category
+    "theta": 0.01,  # texture
+    "zeta": 0.1,  # value
+    "l2": 1e-6,  # weight decay of MLP 1 (reflectance similarity)
+    "regularised_fraction": 0.083,  # texels whose regularisers enter each iteration (the paper's 8.3 %)
+    "sky_resolution": 16,  # N of the recovered 6 x N x N kg
+    "accumulation": "fixed",  # the adjoint's: bitwise reproducible
+    "seed": 0,
+    "checkpoint_every": 50,
+    "snapshot_every": 50,  # maps saved for evaluate's accuracy-against-time curve
+    "holdout": [],  # camera names kept out of training (evaluate's novel views)
+}
+
+PRESETS = {
+    "paper": {
+        **_COMMON,
+        "layers": 16,
+        "width": 1024,
+        "skip_layers": 8,
+        "iterations": 2000,
+        "rays": 65536,
+        "spp": 256,
+        "max_bounces": 10,
+    },
+    "cpu": {
+        **_COMMON,
+        "materials": 16,
+        "layers": 4,
+        "width": 128,
+        "skip_layers": 2,
+        "iterations": 600,
+        "rays": 16384,
+        "spp": 8,
+        "max_bounces": 3,
+        "checkpoint_every": 50,
+        "snapshot_every": 100,
+    },
+    "demo": {
+        **_COMMON,
+        "materials": 8,
+        "layers": 3,
+        "width": 64,
+        "skip_layers": 1,
+        "iterations": 120,
+        "rays": 8192,
+        "spp": 4,
+        "max_bounces": 3,
+        "checkpoint_every": 40,
+        "snapshot_every": 40,
+    },
+}
+
+# Settings that do not change what a run computes: a checkpoint made with other values of these
+# still resumes.
+_NOT_HASHED = {"checkpoint_every", "snapshot_every"}
+
+
+def resolve(preset: str, overrides: dict | None = None, where: str = "milo") -> dict:
+    """The preset's settings with `overrides` on top; an unknown preset or key, or a value of
+    another type than the preset's, is refused naming it."""
+    if preset not in PRESETS:
+        raise SceneError(where, "preset", f"one of {', '.join(PRESETS)}, got {preset!r}")
+    settings = dict(PRESETS[preset])
+    for key, value in (overrides or {}).items():
+        if key not in settings:
+            raise SceneError(where, f"overrides.{key}", f"one of the settings {', '.join(sorted(settings))}")
+        settings[key] = _typed(settings[key], value, where, key)
+    _check(settings, where)
+    return settings
+
+
+def _typed(default, value, where: str, key: str):
+    """`value` if it has the preset value's type (an int where a float is wanted is a float)."""
+    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, float):
+        ok, value = is_number, float(value) if is_number else value
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        raise SceneError(where, f"overrides.{key}", f"a {type(default).__name__} like the preset's {default!r}, got {value!r}")
+    return value
+
+
+def _check(s: dict, where: str) -> None:
+    positive = ("layers", "width", "iterations", "rays", "spp", "max_bounces", "materials", "checkpoint_every", "snapshot_every")
+    for key in positive:
+        if s[key] < 1:
+            raise SceneError(where, key, f"a positive integer, got {s[key]!r}")
+    if s["template"] and not 0 <= s["emitters"] <= s["materials"] - 2:
+        raise SceneError(where, "emitters", f"0 .. materials - 2 (one window and one normal material besides), got {s['emitters']}")
+    if not 0 <= s["skip_layers"] < s["layers"]:
+        raise SceneError(where, "skip_layers", f"0 .. layers - 1, got {s['skip_layers']}")
+    if not 0 < s["regularised_fraction"] <= 1:
+        raise SceneError(where, "regularised_fraction", f"a fraction in (0, 1], got {s['regularised_fraction']}")
+
+
+def settings_hash(settings: dict) -> str:
+    """What a checkpoint must agree with to resume: every setting that changes the computation."""
+    kept = {key: value for key, value in settings.items() if key not in _NOT_HASHED}
+    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]

@@ -1,0 +1,233 @@
+"""The training loop: per iteration a random ray batch, maps from MILO-Net, the path tracer's
+estimate and its adjoint, and the chain rule back into the network.
+
+What is evaluated per iteration (docs/milo.md measures the cost of each):
+1. the network on every texel without gradients (the renderer needs whole maps: a path may
+   bounce anywhere), and the sky MLP on the 6 N N cube directions;
+2. the forward render of the batch and the adjoint pass, giving dLoss_image/dmap per texel;
+3. the network again, with gradients, only on the texels the adjoint reached plus a random
+   `regularised_fraction` of all texels for the regularisers (Eq. 8, 10, value): the chain rule
+   through maps is sum(map * dLoss/dmap) over the texels whose gradient is not zero.
+
+Every random draw is keyed by (seed, iteration): the batch (render/batches.py), the path samples
+(iteration_seed) and the regularised texels, so iteration k computes the same thing whether the
+run started at 0 or resumed at k.
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..render.adjoint import GRAD_CHANNELS, backward, backward_seed
+from ..render.batches import ray_batch
+from ..render.renderer import Renderer
+from ..scene.types import ATLAS_MAPS, Camera, Maps
+from .losses import image_loss, regularisers
+from .network import MiloNet
+from .texels import Texels, sky_directions
+
+CHUNK = 1 << 16  # texels per network call without gradients
+LOG_COLUMNS = (
+    "iteration",
+    "wall_time",
+    "loss",
+    "image",
+    "category",
+    "texture",
+    "value",
+    "texels_touched",
+    "texels_with_grad",
+    "dropped_samples",
+    "seconds_network",
+    "seconds_render",
+    "seconds_adjoint",
+    "seconds_update",
+    "lr_mlp",
+    "lr_template",
+)
+
+
+def iteration_seed(seed: int, iteration: int) -> int:
+    """The path samples' seed of one iteration: 63 bits, so backward_seed's flipped top bit is
+    another seed."""
+    state = np.random.SeedSequence([int(seed), int(iteration)]).generate_state(2, np.uint32)
+    return ((int(state[0]) << 32) | int(state[1])) & ((1 << 63) - 1)
+
+
+@dataclass
+class Views:
+    """The training cameras and their captured pixels, flat in ray-id order (Renderer.ray_offset:
+    camera after camera, row by row), so a batch's targets are one gather."""
+
+    cameras: list[Camera]
+    pixels: np.ndarray  # (total, 3) float32
+
+    @classmethod
+    def from_images(cls, cameras: list[Camera], images: list[np.ndarray]) -> Views:
+        return cls(cameras, np.concatenate([image.reshape(-1, 3) for image in images]).astype(np.float32))
+
+
+@dataclass
+class Training:
+    """One run: the network, its two optimisers and schedules, where it stands."""
+
+    settings: dict
+    net: MiloNet
+    texels: Texels
+    renderer: Renderer
+    views: Views
+    iteration: int = 0
+    wall_time: float = 0.0
+    optimisers: list = field(default_factory=list)
+    schedules: list = field(default_factory=list)
+
+    def __post_init__(self):
+        s = self.settings
+        self.directions = sky_directions(s["sky_resolution"])
+        net = self.net
+        template = list(net.template.parameters()) if net.uses_template else []
+        first_mlp = list((net.material_mlp if net.uses_template else net.maps_mlp).parameters())
+        taken = {id(p) for p in template + first_mlp}
+        others = [p for p in net.parameters() if id(p) not in taken]
+        # AMSGrad for the MLPs, with MLP 1's l2 term (reflectance similarity) as its weight decay
+        groups = [{"params": first_mlp, "weight_decay": s["l2"]}, {"params": others, "weight_decay": 0.0}]
+        self.optimisers = [torch.optim.Adam(groups, lr=s["lr_mlp"], amsgrad=True)]
+        if template:  # the template's gradients are too noisy for adaptive steps (section 3.5)
+            self.optimisers.append(
+                torch.optim.SGD(template, lr=s["lr_template"], momentum=s["momentum"], nesterov=True)
+            )
+        milestones = sorted({max(1, round(f * s["iterations"])) for f in s["decay_at"]})
+        self.schedules = [torch.optim.lr_scheduler.MultiStepLR(o, milestones, gamma=s["decay"]) for o in self.optimisers]
+
+    # --- the maps ---------------------------------------------------------------------------
+    @torch.no_grad()
+    def predict(self) -> Maps:
+        """The six maps the network gives now, at the atlas resolution."""
+        t = self.texels
+        values = torch.cat(
+            [self.net.surface(t.positions[i : i + CHUNK], t.normals[i : i + CHUNK])["maps"] for i in range(0, len(t), CHUNK)]
+        ).numpy()
+        atlas = t.scatter(values, values.shape[1])
+        maps = {name: atlas[..., c].squeeze(-1) if c.stop - c.start == 1 else atlas[..., c] for name, c in GRAD_CHANNELS.items()}
+        n = self.settings["sky_resolution"]
+        kg = self.net.sky(self.directions).numpy().reshape(6, n, n, 3)
+        return Maps(**{name: np.ascontiguousarray(maps[name]) for name in ATLAS_MAPS}, kg=kg)
+
+    # --- one iteration -------------------------------------------------------------------------
+    def step(self) -> dict:
+        s, it = self.settings, self.iteration
+        clock = time.perf_counter()
+        cameras = self.views.cameras
+        total = len(self.views.pixels)
+        requests = ray_batch(cameras, min(s["rays"], total), s["seed"], it)
+        target = self.views.pixels[requests[:, 3]]
+        self.renderer.set_maps(self.predict())
+        t_predict = time.perf_counter()
+        seed = iteration_seed(s["seed"], it)
+        radiance, _, dropped = self.renderer.render_requests(cameras, requests, s["spp"], seed)
+        loss, adjoint = image_loss(radiance, target)
+        t_render = time.perf_counter()
+        grads = backward(
+            self.renderer, cameras, requests, s["alpha"] * adjoint, s["spp"], backward_seed(seed), s["accumulation"]
+        )
+        t_adjoint = time.perf_counter()
+        stats = self._update(grads, it)
+        t_update = time.perf_counter()
+        self.iteration += 1
+        self.wall_time += t_update - clock
+        return {
+            "iteration": self.iteration,
+            "wall_time": self.wall_time,
+            "loss": s["alpha"] * loss + sum(stats["terms"].values()),
+            "image": loss,
+            **{name: stats["terms"].get(name, 0.0) for name in ("category", "texture", "value")},
+            "texels_touched": stats["touched"],
+            "texels_with_grad": stats["with_grad"],
+            "dropped_samples": dropped,
+            "seconds_network": (t_predict - clock) + stats["seconds"],
+            "seconds_render": t_render - t_predict,
+            "seconds_adjoint": t_adjoint - t_render,
+            "seconds_update": t_update - t_adjoint - stats["seconds"],
+            "lr_mlp": self.optimisers[0].param_groups[0]["lr"],
+            "lr_template": self.optimisers[-1].param_groups[0]["lr"] if len(self.optimisers) > 1 else 0.0,
+        }
+
+    def _update(self, grads: dict, iteration: int) -> dict:
+        """The chain rule from dLoss/dmap into the network, the regularisers, one optimiser step."""
+        t = self.texels
+        atlas_grad = np.concatenate([grads[name].reshape(*t.shape, -1) for name in ATLAS_MAPS], -1)
+        texel_grad = t.gather(atlas_grad)
+        touched = np.flatnonzero(np.any(texel_grad != 0, axis=1))
+        rng = np.random.default_rng([int(self.settings["seed"]), int(iteration), 1])
+        share = max(1, round(self.settings["regularised_fraction"] * len(t)))
+        regularised = np.sort(rng.choice(len(t), size=share, replace=False))
+        rows = np.union1d(touched, regularised)
+        clock = time.perf_counter()
+        out = self.net.surface(t.positions[rows], t.normals[rows])
+        surrogate = (out["maps"] * torch.from_numpy(texel_grad[rows].astype(np.float32))).sum()
+        picked = np.searchsorted(rows, regularised)
+        terms = regularisers({name: value[picked] for name, value in out.items()}, self.settings)
+        sky_grad = torch.from_numpy(grads["kg"].reshape(-1, 3).astype(np.float32))
+        surrogate = surrogate + (self.net.sky(self.directions) * sky_grad).sum()
+        for optimiser in self.optimisers:
+            optimiser.zero_grad(set_to_none=True)
+        (surrogate + sum(terms.values())).backward()
+        for optimiser, schedule in zip(self.optimisers, self.schedules):
+            optimiser.step()
+            schedule.step()
+        return {
+            "terms": {name: float(value.detach()) for name, value in terms.items()},
+            "touched": len(touched),
+            "with_grad": len(rows),
+            "seconds": time.perf_counter() - clock,
+        }
+
+    # --- checkpoints ------------------------------------------------------------------------
+    def state(self) -> dict:
+        return {
+            "iteration": self.iteration,
+            "wall_time": self.wall_time,
+            "network": self.net.state_dict(),
+            "optimisers": [o.state_dict() for o in self.optimisers],
+            "schedules": [s.state_dict() for s in self.schedules],
+            "torch_rng": torch.get_rng_state(),
+        }
+
+    def restore(self, state: dict) -> None:
+        self.net.load_state_dict(state["network"])
+        for optimiser, saved in zip(self.optimisers, state["optimisers"]):
+            optimiser.load_state_dict(saved)
+        for schedule, saved in zip(self.schedules, state["schedules"]):
+            schedule.load_state_dict(saved)
+        torch.set_rng_state(state["torch_rng"])
+        self.iteration, self.wall_time = int(state["iteration"]), float(state["wall_time"])
+
+
+class TrainingLog:
+    """log.csv, one row per iteration, appended as the run goes; a resumed run first drops the
+    rows after its checkpoint (the killed run's last iterations are computed again)."""
+
+    def __init__(self, path, resume_from: int = 0):
+        self.path = Path(path)
+        kept = []
+        if resume_from and self.path.exists():
+            with open(self.path, newline="") as handle:
+                kept = [row for row in csv.DictReader(handle) if int(row["iteration"]) <= resume_from]
+        with open(self.path, "w", newline="") as handle:
+            writer = csv.DictWriter(handle, LOG_COLUMNS)
+            writer.writeheader()
+            writer.writerows(kept)
+
+    def append(self, row: dict) -> None:
+        with open(self.path, "a", newline="") as handle:
+            csv.DictWriter(handle, LOG_COLUMNS).writerow({key: _cell(row[key]) for key in LOG_COLUMNS})
+
+
+def _cell(value):
+    return f"{value:.6g}" if isinstance(value, float) else value
