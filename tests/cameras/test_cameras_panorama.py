@@ -156,3 +156,24 @@ def test_a_panorama_of_a_sky_unwraps_into_the_renders_of_the_sky_from_the_face_c
         # bilinear, one box-filtered over the pixel: measured mean 0.004, max 0.024 (a texel's
         # step is ~0.04); a mirrored face is off by the sky's range, ~1 (measured 0.63)
         assert error.mean() < 0.006 and error.max() < 0.04, (camera.name, error.mean(), error.max())
+
+
+def test_a_face_named_like_a_photograph_or_a_face_size_of_zero_is_refused(tmp_path, capsys):
+    source = write_colmap_capture(tmp_path, np.ones((HEIGHT, WIDTH, 3), np.float32))
+    out = tmp_path / "cameras"
+    cli = ["cameras", str(source), "--out", str(out), "--images", str(tmp_path / "images")]
+    assert main([*cli, "--face-size", "0"]) == 2
+    assert (
+        "cameras --face-size: cube-face width in pixels: expected an integer of at least 1, got 0"
+        in capsys.readouterr().err
+    )
+    rec = pycolmap.Reconstruction(str(source))  # a photograph named as the panorama's +x face
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(camera_id=2, model="PINHOLE", width=4, height=4, params=[2, 2, 2, 2])
+    )
+    rec.add_image_with_trivial_frame(pycolmap.Image(name="room_px.exr", camera_id=2, image_id=2), pycolmap.Rigid3d())
+    rec.write_text(str(source))
+    write_exr(tmp_path / "images" / "room_px.exr", np.ones((4, 4, 3), np.float32))
+    assert main(cli) == 2
+    assert "camera room_px.exr image name: expected one camera per image name" in capsys.readouterr().err
+    assert not out.exists()

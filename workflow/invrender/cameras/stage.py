@@ -54,7 +54,7 @@ def run(source, out_dir, images_dir=None, face_size: int | None = None, progress
         log.info("%s: %d camera(s) -> %s", source, len(cameras), out_dir)
         return cameras
     views = _locate(source, Path(images_dir), cameras)
-    written = _plan(views, face_size)
+    written = _plan(source, views, face_size)
     with atomic_dir(out_dir, kind="cameras") as tmp:
         images_out = tmp / "images"
         for camera, folder in tqdm(views, desc="cameras", unit="image", disable=not progress, leave=False):
@@ -104,7 +104,7 @@ def _relative_to_images(camera: Camera, base: Path, images_dir: Path) -> tuple[C
     return replace(camera, name=inside.as_posix()), images_dir
 
 
-def _plan(views: list[tuple[Camera, Path]], size: int | None) -> list[Camera]:
+def _plan(source: Path, views: list[tuple[Camera, Path]], size: int | None) -> list[Camera]:
     """The cameras the stage writes (a panorama's six faces in its place), refused before any
     work if two share an image name."""
     written = []
@@ -116,7 +116,9 @@ def _plan(views: list[tuple[Camera, Path]], size: int | None) -> list[Camera]:
     seen = set()
     for camera in written:
         if camera.name in seen:
-            raise SceneError(camera.name, "image name", "one camera per image name (a panorama's faces included)")
+            raise SceneError(
+                source, f"camera {camera.name} image name", "one camera per image name (a panorama's faces included)"
+            )
         seen.add(camera.name)
     return written
 
