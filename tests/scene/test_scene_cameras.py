@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 
 from invrender.scene import Camera, SceneError
-from invrender.scene.cameras import project_points, read_cameras, write_colmap
+from invrender.scene.cameras import (
+    cube_face_cameras,
+    panorama_pixels,
+    pixel_directions,
+    project_points,
+    read_cameras,
+    write_colmap,
+)
+from invrender.scene.cubemap import cube_to_direction
 
 
 def random_rotation(rng):
@@ -178,3 +186,63 @@ def test_transforms_json_to_colmap_roundtrip(tmp_path):
     back = read_cameras(tmp_path / "sparse")
     np.testing.assert_allclose(back[0].R, cams[0].R, atol=1e-9)
     np.testing.assert_allclose(back[0].t, cams[0].t, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- panoramas
+
+
+def test_panorama_pixels_are_colmaps_equirectangular_projection():
+    import pycolmap
+
+    rng = np.random.default_rng(5)
+    directions = rng.normal(size=(500, 3))
+    colmap = pycolmap.Camera(camera_id=1, model="EQUIRECTANGULAR", width=300, height=140, params=[300, 140])
+    np.testing.assert_allclose(panorama_pixels(directions, 300, 140), colmap.img_from_cam(directions), atol=1e-9)
+
+
+def test_cube_face_images_are_mirrored_cube_map_faces_turned_with_the_panorama():
+    """Face k of cube_face_cameras sees face k of the kg cube map (scene/cubemap.py), left to
+    right mirrored: pixel (row r, column c) looks along the texel (r, N - 1 - c)'s direction."""
+    n = 6
+    rows, cols = np.mgrid[0:n, 0:n] + 0.5
+    for k, face in enumerate(cube_face_cameras([1.0, 2.0, 3.0], n)):
+        d = pixel_directions(face)
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        np.testing.assert_allclose(d, cube_to_direction(k, (n - cols) / n, rows / n), atol=1e-12)
+    turn = random_rotation(np.random.default_rng(6))  # world-to-panorama
+    for plain, turned in zip(cube_face_cameras([0, 0, 0], n), cube_face_cameras([0, 0, 0], n, rotation=turn)):
+        np.testing.assert_allclose(pixel_directions(turned), pixel_directions(plain) @ turn, atol=1e-12)
+
+
+def equirectangular_model(tmp_path, params=(64, 32)):
+    import pycolmap
+
+    rec = pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(camera_id=1, model="EQUIRECTANGULAR", width=64, height=32, params=list(params))
+    )
+    rec.add_image_with_trivial_frame(pycolmap.Image(name="p.jpg", camera_id=1, image_id=1), pycolmap.Rigid3d())
+    rec.write_text(str(tmp_path))
+    return tmp_path
+
+
+def test_panoramas_are_read_only_for_the_cameras_stage(tmp_path):
+    model = equirectangular_model(tmp_path)
+    with pytest.raises(SceneError, match=r"got EQUIRECTANGULAR \(EQUIRECTANGULAR panoramas: `invrender cameras"):
+        read_cameras(model)
+    (pano,) = read_cameras(model, panoramas=True)
+    assert (pano.model, pano.width, pano.height, pano.params.tolist()) == ("EQUIRECTANGULAR", 64, 32, [64, 32])
+
+
+def test_a_panorama_that_is_not_the_full_sphere_is_refused(tmp_path):
+    (tmp_path / "crop").mkdir()
+    with pytest.raises(SceneError, match=r"cameras\.txt: camera 1 \(image p\.jpg\) params: expected w, h equal to"):
+        read_cameras(equirectangular_model(tmp_path / "crop", params=(80, 32)), panoramas=True)
+    frame = {"file_path": "p.jpg", "transform_matrix": np.eye(4).tolist()}
+    doc = {"camera_model": "EQUIRECTANGULAR", "w": 64, "h": 32, "fl_x": 32, "fl_y": 32, "frames": [frame]}
+    (tmp_path / "transforms.json").write_text(json.dumps(doc))
+    (pano,) = read_cameras(tmp_path / "transforms.json", panoramas=True)  # fl_x = w / 2, fl_y = h: nerfstudio's
+    assert pano.params.tolist() == [64, 32]
+    (tmp_path / "transforms.json").write_text(json.dumps({**doc, "fl_y": 20}))
+    with pytest.raises(SceneError, match=r"frames\[0\] fl_y: expected 32 for an EQUIRECTANGULAR camera of 64 x 32"):
+        read_cameras(tmp_path / "transforms.json", panoramas=True)

@@ -73,7 +73,7 @@ def cmd_render(args):
 def cmd_cameras(args):
     from .cameras import stage
 
-    stage.run(args.source, args.out)
+    stage.run(args.source, args.out, images_dir=args.images, face_size=args.face_size)
 
 
 def cmd_geometry(args):
@@ -197,9 +197,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device")
     p.set_defaults(func=cmd_render)
 
-    p = stages.add_parser("cameras", help="a capture's cameras (COLMAP or transforms.json) -> a COLMAP text model")
+    p = stages.add_parser(
+        "cameras", help="a capture's cameras (COLMAP or transforms.json) and images -> a COLMAP text model + images/"
+    )
     p.add_argument("source", help="COLMAP sparse model directory (text or binary) or transforms.json")
-    p.add_argument("--out", required=True, help="directory to write the COLMAP text model to")
+    p.add_argument("--out", required=True, help="directory to write the COLMAP text model (and images/) to")
+    p.add_argument(
+        "--images",
+        help="the capture's images (COLMAP names are relative to it): checked and linked into OUT/images, "
+        "equirectangular panoramas unwrapped into six cube faces each; without it, the model only",
+    )
+    p.add_argument("--face-size", type=int, help="cube-face width in pixels (default: a quarter of the panorama's)")
     p.set_defaults(func=cmd_cameras)
 
     p = stages.add_parser(

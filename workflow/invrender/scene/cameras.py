@@ -10,6 +10,13 @@ intrinsics ``fl_x, fl_y, cx, cy, w, h`` (pixels), ``k1, k2, p1, p2`` and ``camer
 from the frame, else from the top level; ``camera_angle_x`` / ``camera_angle_y`` (radians, full
 field of view) stand in for missing focal lengths; a missing ``w, h`` is read from the image.
 The world frame is the file's: no axis change is applied to it.
+
+Panoramas (``read_cameras(..., panoramas=True)``, for the cameras stage only): a COLMAP camera of
+model ``EQUIRECTANGULAR`` (params ``w, h``), or a transforms.json ``camera_model`` of
+``EQUIRECTANGULAR`` (nerfstudio's camera type), become a ``Camera`` of that model, params
+``[w, h]``. Both describe the same full sphere in OpenCV camera axes: the image's centre looks
+along +z, columns turn right (+x), the top row is up (-y); ``panorama_pixels`` is the projection.
+No other stage takes them: the cameras stage unwraps each into six cube-face PINHOLE views.
 """
 
 from __future__ import annotations
@@ -24,35 +31,60 @@ import numpy as np
 from .atomic import atomic_dir
 from .types import Camera, SceneError
 
-__all__ = ["read_cameras", "read_colmap", "read_transforms_json", "write_colmap", "check_camera", "project_points"]
+__all__ = [
+    "read_cameras",
+    "read_colmap",
+    "read_transforms_json",
+    "write_colmap",
+    "write_colmap_text",
+    "check_camera",
+    "is_colmap_model",
+    "check_panorama",
+    "project_points",
+    "pixel_directions",
+    "panorama_pixels",
+    "cube_face_cameras",
+    "PANORAMA_MODEL",
+]
 
 log = logging.getLogger(__name__)
 
 SUPPORTED_MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV")
 PARAM_COUNT = {"PINHOLE": 4, "SIMPLE_PINHOLE": 3, "OPENCV": 8}
+# A 360 x 180 degree panorama: COLMAP's model name, which nerfstudio's transforms.json uses too.
+PANORAMA_MODEL = "EQUIRECTANGULAR"
+PANORAMA_HINT = f"({PANORAMA_MODEL} panoramas: `invrender cameras --images` unwraps them into cube-face views)"
 # OpenGL camera axes -> OpenCV camera axes (flip y and z), as a right factor on camera-to-world.
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 
 
-def read_cameras(path) -> list[Camera]:
+def read_cameras(path, panoramas: bool = False) -> list[Camera]:
     """Read a COLMAP sparse model directory or a transforms.json file.
 
     A directory without COLMAP files but with a ``transforms.json`` is read as the latter.
+    ``panoramas``: take EQUIRECTANGULAR cameras too (the cameras stage, which unwraps them);
+    otherwise they are refused.
     """
     path = Path(path)
     if path.is_file():
         if path.suffix.lower() == ".json":
-            return read_transforms_json(path)
+            return read_transforms_json(path, panoramas)
         raise SceneError(path, "(file)", "a COLMAP sparse model directory or a transforms.json file")
     if not path.is_dir():
         raise SceneError(path, "(file)", "an existing COLMAP sparse model directory or transforms.json")
-    has_colmap = any((path / f"{name}.{ext}").exists() for name in ("cameras", "images") for ext in ("txt", "bin"))
-    if not has_colmap and (path / "transforms.json").is_file():
-        return read_transforms_json(path / "transforms.json")
-    return read_colmap(path)
+    if not is_colmap_model(path) and (path / "transforms.json").is_file():
+        return read_transforms_json(path / "transforms.json", panoramas)
+    return read_colmap(path, panoramas)
 
 
 # ---------------------------------------------------------------------------- COLMAP
+
+
+def is_colmap_model(path) -> bool:
+    """A directory with COLMAP model files (text or binary): read_cameras reads it as COLMAP even
+    when a transforms.json lies beside them."""
+    path = Path(path)
+    return path.is_dir() and any((path / f"{n}.{e}").exists() for n in ("cameras", "images") for e in ("txt", "bin"))
 
 
 def _model_file(directory: Path, name: str) -> Path:
@@ -62,7 +94,7 @@ def _model_file(directory: Path, name: str) -> Path:
     return directory / f"{name}.txt"
 
 
-def read_colmap(directory) -> list[Camera]:
+def read_colmap(directory, panoramas: bool = False) -> list[Camera]:
     import pycolmap
 
     directory = Path(directory)
@@ -79,12 +111,10 @@ def read_colmap(directory) -> list[Camera]:
             continue
         cam = rec.cameras[image.camera_id]
         model = cam.model.name
-        if model not in SUPPORTED_MODELS:
-            raise SceneError(
-                cameras_file,
-                f"camera {image.camera_id} (image {image.name}) model",
-                f"one of {', '.join(SUPPORTED_MODELS)}, got {model}",
-            )
+        field = f"camera {image.camera_id} (image {image.name})"
+        if model not in SUPPORTED_MODELS and not (panoramas and model == PANORAMA_MODEL):
+            hint = f" {PANORAMA_HINT}" if model == PANORAMA_MODEL else ""
+            raise SceneError(cameras_file, f"{field} model", f"one of {', '.join(SUPPORTED_MODELS)}, got {model}{hint}")
         pose = image.cam_from_world().matrix()
         camera = Camera(
             name=image.name,
@@ -95,7 +125,7 @@ def read_colmap(directory) -> list[Camera]:
             R=np.asarray(pose[:, :3], np.float64).copy(),
             t=np.asarray(pose[:, 3], np.float64).copy(),
         )
-        check_camera(camera, cameras_file, f"camera {image.camera_id} (image {image.name})")
+        (check_panorama if model == PANORAMA_MODEL else check_camera)(camera, cameras_file, field)
         out.append(camera)
     if skipped:
         log.warning("%s: %d image(s) without a pose skipped: %s", directory, len(skipped), ", ".join(skipped[:5]))
@@ -134,6 +164,28 @@ def check_camera(cam: Camera, file, field: str | None = None) -> None:
             f"cx, cy within the {cam.width} x {cam.height} image "
             f"or {PRINCIPAL_POINT_MARGIN:.0%} of its size outside it, got ({cx:g}, {cy:g})",
         )
+    _check_pose(cam, file, field)
+
+
+def check_panorama(cam: Camera, file, field: str | None = None) -> None:
+    """Refuse a panorama that is not a full sphere (params w, h other than the image's size: a
+    crop or a rescale, which the unwrapping does not model), or whose size or pose is not one a
+    camera can have (as ``check_camera``)."""
+    field = field or f"camera {cam.name}"
+    if not (cam.width >= 1 and cam.height >= 1):
+        raise SceneError(file, f"{field} width,height", f"at least 1 pixel each, got {cam.width} x {cam.height}")
+    params = np.asarray(cam.params, np.float64)
+    if params.shape != (2,) or not np.allclose(params, [cam.width, cam.height]):
+        raise SceneError(
+            file,
+            f"{field} params",
+            f"w, h equal to the {cam.width} x {cam.height} image (a full 360 x 180 degree panorama), "
+            f"got {params.tolist()}",
+        )
+    _check_pose(cam, file, field)
+
+
+def _check_pose(cam: Camera, file, field: str) -> None:
     R, t = np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64)
     if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise SceneError(file, f"{field} pose", "a finite rotation and translation")
@@ -174,11 +226,17 @@ def _colmap_error(directory: Path, exc: Exception) -> SceneError:
 
 
 def write_colmap(directory, cameras: list[Camera]) -> None:
-    """Write a text COLMAP model (cameras, images, rigs, frames, empty points3D) atomically.
+    """Write a text COLMAP model (cameras, images, rigs, frames, empty points3D) atomically, as a
+    directory of kind "cameras" (``write_colmap_text`` is the model's part)."""
+    with atomic_dir(directory, kind="cameras") as tmp:
+        write_colmap_text(tmp, cameras)
 
-    One COLMAP camera, trivial rig and trivial frame per image, ids 1..n in image-name order.
-    pycolmap 4 also writes rigs.txt and frames.txt; COLMAP 3.x readers ignore them.
-    """
+
+def write_colmap_text(directory, cameras: list[Camera]) -> None:
+    """Write a text COLMAP model into the existing ``directory`` (not atomically: the caller's
+    ``atomic_dir`` is). One COLMAP camera, trivial rig and trivial frame per image, ids 1..n in
+    image-name order. pycolmap 4 also writes rigs.txt and frames.txt; COLMAP 3.x readers ignore
+    them."""
     import pycolmap
 
     directory = Path(directory)
@@ -201,8 +259,7 @@ def write_colmap(directory, cameras: list[Camera]) -> None:
         )
         pose = np.hstack([np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64).reshape(3, 1)])
         rec.add_image_with_trivial_frame(pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose))
-    with atomic_dir(directory, kind="cameras") as tmp:
-        rec.write_text(str(tmp))
+    rec.write_text(str(directory))
 
 
 def project_points(camera: Camera, points) -> np.ndarray:
@@ -224,6 +281,29 @@ def project_points(camera: Camera, points) -> np.ndarray:
     uv = np.stack([fx * xd + cx, fy * yd + cy], axis=1)
     uv[z <= 0] = np.nan
     return uv
+
+
+def pixel_directions(camera: Camera) -> np.ndarray:
+    """(H, W, 3) world direction (not normalised) of each pixel centre of a camera without
+    distortion: the inverse of ``project_points`` (pixel (x, y)'s centre at (x + 0.5, y + 0.5))."""
+    if np.any(camera.distortion):
+        raise ValueError(f"pixel_directions: camera {camera.name} has distortion {camera.distortion.tolist()}")
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    ys, xs = np.mgrid[0 : camera.height, 0 : camera.width] + 0.5
+    d_cam = np.stack([(xs - cx) / fx, (ys - cy) / fy, np.ones_like(xs)], axis=-1)
+    return d_cam @ np.asarray(camera.R, np.float64)  # R^T d_cam per pixel
+
+
+def panorama_pixels(directions, width: int, height: int) -> np.ndarray:
+    """(..., 2) continuous pixel coordinates (u, v) of camera-frame directions (..., 3) in a full
+    equirectangular panorama of width x height (COLMAP's EQUIRECTANGULAR, nerfstudio's
+    EQUIRECTANGULAR): longitude atan2(x, z) from the image's centre column, growing to the right,
+    latitude asin(y / |d|) from the middle row, growing downwards (OpenCV's y); pixel (0, 0)'s
+    centre at (0.5, 0.5), u in [0, W], v in [0, H]."""
+    d = np.asarray(directions, np.float64)
+    lon = np.arctan2(d[..., 0], d[..., 2])
+    lat = np.arcsin(np.clip(d[..., 1] / np.linalg.norm(d, axis=-1), -1.0, 1.0))
+    return np.stack([width * (0.5 + lon / (2 * np.pi)), height * (0.5 + lat / np.pi)], axis=-1)
 
 
 # ---------------------------------------------------------------------------- transforms.json
@@ -262,7 +342,64 @@ def _resolve_image(base: Path, file_path: str) -> tuple[str, Path | None]:
     return name, None
 
 
-def read_transforms_json(path) -> list[Camera]:
+def _pinhole_params(path: Path, field: str, w: float, h: float, model, number, get) -> tuple[list[float], str]:
+    """COLMAP parameters and model of a transforms.json pinhole frame (``number``, ``get`` read a
+    key of the frame, else of the top level)."""
+    fx, fy = number("fl_x"), number("fl_y")
+    angle_x, angle_y = number("camera_angle_x"), number("camera_angle_y")
+    if fx is None and angle_x is not None:
+        fx = 0.5 * w / math.tan(0.5 * angle_x)
+    if fy is None and angle_y is not None:
+        fy = 0.5 * h / math.tan(0.5 * angle_y)
+    if fx is None and fy is not None:
+        fx = fy
+    if fy is None:
+        fy = fx
+    if fx is None:
+        raise SceneError(path, f"{field} fl_x", "a focal length fl_x (pixels) or camera_angle_x (radians)")
+    if fx <= 0 or fy <= 0:
+        raise SceneError(path, f"{field} fl_x,fl_y", f"positive focal lengths, got {fx}, {fy}")
+    cx, cy = number("cx", w / 2), number("cy", h / 2)
+    dist = [number(k, 0.0) for k in ("k1", "k2", "p1", "p2")]
+    for k in ("k3", "k4"):
+        if (number(k, 0.0) or 0.0) != 0.0:
+            raise SceneError(path, f"{field}.{k}", f"0 (the OPENCV model has k1, k2, p1, p2 only), got {get(k)}")
+    if model is None:
+        model = "OPENCV" if any(dist) else "PINHOLE"
+    if model == "OPENCV":
+        params = [fx, fy, cx, cy, *dist]
+    elif any(dist):
+        raise SceneError(path, f"{field} k1,k2,p1,p2", f"no distortion for camera_model {model}")
+    elif model == "SIMPLE_PINHOLE":
+        if not math.isclose(fx, fy, rel_tol=1e-9):
+            raise SceneError(path, f"{field} fl_x,fl_y", f"fl_x == fl_y for SIMPLE_PINHOLE, got {fx}, {fy}")
+        params = [fx, cx, cy]
+    else:
+        params = [fx, fy, cx, cy]
+    return params, model
+
+
+# nerfstudio's EQUIRECTANGULAR camera: fl_x = w / 2 (pi radians per half width), fl_y = h, the
+# principal point at the centre; other values would be a crop or a shift of the sphere.
+def _panorama_params(path: Path, field: str, w: float, h: float, number) -> list[float]:
+    """COLMAP parameters (w, h) of a transforms.json panorama frame; intrinsics, when given, must
+    be those of the full sphere (within half a pixel)."""
+    for key, full in (("fl_x", w / 2), ("fl_y", h), ("cx", w / 2), ("cy", h / 2)):
+        value = number(key)
+        if value is not None and abs(value - full) > 0.5:
+            raise SceneError(
+                path,
+                f"{field} {key}",
+                f"{full:g} for an {PANORAMA_MODEL} camera of {w:g} x {h:g} (a full 360 x 180 degree panorama), "
+                f"got {value:g}",
+            )
+    for key in ("k1", "k2", "k3", "k4", "p1", "p2"):
+        if (number(key, 0.0) or 0.0) != 0.0:
+            raise SceneError(path, f"{field} {key}", f"no distortion for an {PANORAMA_MODEL} camera, got {number(key)}")
+    return [w, h]
+
+
+def read_transforms_json(path, panoramas: bool = False) -> list[Camera]:
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -301,9 +438,10 @@ def read_transforms_json(path) -> list[Camera]:
         name, image_file = _resolve_image(base, file_path)
 
         model = get("camera_model", None)
-        if model is not None and model not in SUPPORTED_MODELS:
+        if model is not None and model not in SUPPORTED_MODELS and not (panoramas and model == PANORAMA_MODEL):
             where = f"{field}.camera_model" if "camera_model" in frame else "camera_model"
-            raise SceneError(path, where, f"one of {', '.join(SUPPORTED_MODELS)}, got {model}")
+            hint = f" {PANORAMA_HINT}" if model == PANORAMA_MODEL else ""
+            raise SceneError(path, where, f"one of {', '.join(SUPPORTED_MODELS)}, got {model}{hint}")
 
         w, h = number("w"), number("h")
         if w is None or h is None:
@@ -311,37 +449,10 @@ def read_transforms_json(path) -> list[Camera]:
             if size is None:
                 raise SceneError(path, f"{field} w,h", f"image size w, h, or a readable image at {base / name}")
             w, h = (w or size[0]), (h or size[1])
-        fx, fy = number("fl_x"), number("fl_y")
-        angle_x, angle_y = number("camera_angle_x"), number("camera_angle_y")
-        if fx is None and angle_x is not None:
-            fx = 0.5 * w / math.tan(0.5 * angle_x)
-        if fy is None and angle_y is not None:
-            fy = 0.5 * h / math.tan(0.5 * angle_y)
-        if fx is None and fy is not None:
-            fx = fy
-        if fy is None:
-            fy = fx
-        if fx is None:
-            raise SceneError(path, f"{field} fl_x", "a focal length fl_x (pixels) or camera_angle_x (radians)")
-        if fx <= 0 or fy <= 0:
-            raise SceneError(path, f"{field} fl_x,fl_y", f"positive focal lengths, got {fx}, {fy}")
-        cx, cy = number("cx", w / 2), number("cy", h / 2)
-        dist = [number(k, 0.0) for k in ("k1", "k2", "p1", "p2")]
-        for k in ("k3", "k4"):
-            if (number(k, 0.0) or 0.0) != 0.0:
-                raise SceneError(path, f"{field}.{k}", f"0 (the OPENCV model has k1, k2, p1, p2 only), got {get(k)}")
-        if model is None:
-            model = "OPENCV" if any(dist) else "PINHOLE"
-        if model == "OPENCV":
-            params = [fx, fy, cx, cy, *dist]
-        elif any(dist):
-            raise SceneError(path, f"{field} k1,k2,p1,p2", f"no distortion for camera_model {model}")
-        elif model == "SIMPLE_PINHOLE":
-            if not math.isclose(fx, fy, rel_tol=1e-9):
-                raise SceneError(path, f"{field} fl_x,fl_y", f"fl_x == fl_y for SIMPLE_PINHOLE, got {fx}, {fy}")
-            params = [fx, cx, cy]
+        if model == PANORAMA_MODEL:
+            params = _panorama_params(path, field, w, h, number)
         else:
-            params = [fx, fy, cx, cy]
+            params, model = _pinhole_params(path, field, w, h, model, number, get)
 
         m = frame.get("transform_matrix")
         try:
@@ -368,7 +479,7 @@ def read_transforms_json(path) -> list[Camera]:
             R=R,
             t=-R @ center,
         )
-        check_camera(camera, path, f"{field} ({name})")
+        (check_panorama if model == PANORAMA_MODEL else check_camera)(camera, path, f"{field} ({name})")
         out.append(camera)
     out.sort(key=lambda c: c.name)
     names = [c.name for c in out]
@@ -393,16 +504,20 @@ CUBE_FACE_AXES = (
 CUBE_FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
 
 
-def cube_face_cameras(center, size: int, name: str = "pano") -> list[Camera]:
+def cube_face_cameras(center, size: int, name: str = "pano", rotation=None) -> list[Camera]:
     """A panorama as six 90-degree PINHOLE cameras at `center` (how MILO takes panoramas in):
     each face's frustum covers exactly its cube face, so the six images cover every direction
     once. Rotations are proper (det +1), as COLMAP requires, which makes each face image the
-    mirror of an OpenGL cube-map face: cube maps are left-handed."""
+    mirror of an OpenGL cube-map face (left to right): cube maps are left-handed. `rotation`
+    (3 x 3, world-to-panorama, default identity) turns the cube with the panorama: the faces are
+    then the panorama's own (+Z its centre, -Y its top), so its poles fall on face centres.
+    Images are named ``<name>_<face>.exr``, faces px, nx, py, ny, pz, nz."""
     center = np.asarray(center, np.float64)
+    rotation = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
     cameras = []
     for face, (forward, down) in zip(CUBE_FACE_NAMES, CUBE_FACE_AXES):
         z, y = np.asarray(forward, np.float64), np.asarray(down, np.float64)
-        R = np.stack([np.cross(y, z), y, z])  # rows: camera x (right), y (down), z (forward)
+        R = np.stack([np.cross(y, z), y, z]) @ rotation  # rows: camera x (right), y (down), z (forward)
         params = np.array([size / 2, size / 2, size / 2, size / 2], np.float64)
         cameras.append(Camera(f"{name}_{face}.exr", "PINHOLE", size, size, params, R, -R @ center))
     return cameras
