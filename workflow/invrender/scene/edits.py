@@ -1,0 +1,217 @@
+"""Scene edits (MILO section 4): insert an object, relight, change the sky, repaint a region.
+
+Every edit takes a `Scene` (v1 or v2) and returns a new one; the input is left untouched (its
+arrays are copied where they change, shared where they do not). The renderer reads
+`scene.mesh` and `scene.maps` (one mesh, one packed atlas), and so the edits work on those:
+
+- an inserted object becomes a material set of its own, packed beside the scene's texels by
+  `scene/packing.py` (a v2 scene keeps its objects and gains one; a v1 scene's atlas is treated
+  as one set, so the result is again one mesh and one atlas);
+- regions are (H, W) bool masks over the packed atlas; `emitter_regions` names the connected
+  groups of emitting texels, so that "switch off lamp 2" can be said. One lamp whose surface is
+  cut into several charts of the atlas is several regions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from .format import _check_map, validate_kg
+from .packing import layout, pack_scene, validate_objects
+from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
+
+__all__ = [
+    "MATERIAL_DEFAULTS",
+    "sphere_mesh",
+    "uniform_material",
+    "insert_object",
+    "scale_emission",
+    "set_sky",
+    "edit_material",
+    "emitter_regions",
+]
+
+# An inserted object's material where a key is not given: black, not shiny, not emitting, and the
+# smallest roughness MILO's templates use for emitters (ka is never 0: format.MAP_RANGES).
+MATERIAL_DEFAULTS = {"kd": 0.0, "ks": 0.0, "ka": 0.1, "ke": 0.0, "kw": 0.0}
+WHERE = "(edit)"  # the `file` of a SceneError about an edit made in memory
+
+
+def sphere_mesh(center, radius: float, segments: int = 32) -> Mesh:
+    """A UV sphere: `segments` columns of longitude, segments // 2 rows of latitude, triangles
+    counter-clockwise seen from outside, and UVs (u = longitude, v = latitude, v up) that cover
+    [0, 1]^2, so a uniform material set of any size holds all of it. The seam column and the
+    poles repeat their positions exactly (one vertex per UV), so no ray leaks through: closed for
+    shadows. Each pole row is one triangle per column, not a degenerate quad."""
+    if not (np.isfinite(radius) and radius > 0):
+        raise SceneError(WHERE, "radius", f"a positive number of meters, got {radius!r}")
+    columns, rows = max(int(segments), 3), max(int(segments) // 2, 2)
+    theta = np.pi * np.arange(rows + 1) / rows  # polar angle from +Y
+    phi = 2.0 * np.pi * np.arange(columns + 1) / columns
+    t, p = np.meshgrid(theta, phi, indexing="ij")  # (rows + 1, columns + 1)
+    unit = np.stack([np.sin(t) * np.cos(p), np.cos(t), -np.sin(t) * np.sin(p)], -1)
+    unit[0], unit[-1] = (0.0, 1.0, 0.0), (0.0, -1.0, 0.0)  # exact poles: sin(pi) is not 0 in floats
+    unit[:, -1] = unit[:, 0]  # the seam: the same positions bit for bit
+    positions = (np.asarray(center, np.float64) + radius * unit).reshape(-1, 3).astype(np.float32)
+    u, v = np.meshgrid(np.arange(columns + 1) / columns, 1.0 - np.arange(rows + 1) / rows)
+    uvs = np.stack([u, v], -1).reshape(-1, 2).astype(np.float32)
+    index = np.arange((rows + 1) * (columns + 1)).reshape(rows + 1, columns + 1)
+    a, b = index[:-1, :-1], index[:-1, 1:]  # a quad's upper corners (towards +Y), phi increasing
+    c, d = index[1:, :-1], index[1:, 1:]
+    # (a, c, d) and (a, d, b) are counter-clockwise seen from outside (tests/scene/test_edits.py
+    # checks the signed volume and every face normal).
+    upper = np.stack([a, c, d], -1)[:-1]  # in the last row, c and d are both the south pole
+    lower = np.stack([a, d, b], -1)[1:]  # in row 0, a and b are both the north pole
+    faces = np.concatenate([upper.reshape(-1, 3), lower.reshape(-1, 3)]).astype(np.int32)
+    return Mesh(positions=positions, faces=faces, uvs=uvs)
+
+
+def _material_value(name: str, value, shape, field: str) -> np.ndarray:
+    """A float (or an RGB triple for kd, ks, ke) broadcast to a map of `shape`, checked against
+    the map's range (format.MAP_RANGES) with the message every scene map gets."""
+    channels = MAP_CHANNELS[name]
+    try:
+        array = np.asarray(value, np.float32)
+    except (TypeError, ValueError):
+        array = np.zeros(0)
+    if array.shape not in {(), (channels,)}:
+        raise SceneError(WHERE, field, f"a number{' or an RGB triple' if channels == 3 else ''}, got {value!r}")
+    full = np.broadcast_to(array, (*shape, channels) if channels == 3 else shape).copy()
+    return _check_map(name, full, WHERE, field)
+
+
+def uniform_material(material: dict, resolution: int = 8, field: str = "material") -> Atlas:
+    """A material set of resolution^2 texels, every one with `material`'s values (keys of
+    MATERIAL_DEFAULTS; missing ones take the default)."""
+    unknown = sorted(set(material) - set(MATERIAL_DEFAULTS))
+    if unknown:
+        raise SceneError(WHERE, f"{field}.{unknown[0]}", f"one of the keys {list(MATERIAL_DEFAULTS)}")
+    values = {**MATERIAL_DEFAULTS, **material}
+    shape = (int(resolution), int(resolution))
+    return Atlas(**{m: _material_value(m, values[m], shape, f"{field}.{m}") for m in ATLAS_MAPS})
+
+
+def _next_instance_id(scene: Scene) -> int:
+    ids = scene.mesh.instance_ids
+    return 1 + (int(np.max(ids)) if ids is not None and len(ids) else 0)
+
+
+def insert_object(scene: Scene, mesh: Mesh, material: dict, name: str = "inserted", resolution: int = 8) -> Scene:
+    """A new scene: `scene` plus `mesh` (world space, UVs in [0, 1]) with a uniform material in a
+    resolution^2 material set of its own and a new instance id (one above the largest), so that
+    its pixels can be told apart. A v2 scene gains an object and a set named `name`; a v1 scene's
+    atlas is packed as one set beside the new one (scene/packing.py), its UVs moved into it. The
+    cameras and kg are kept."""
+    atlas = uniform_material(material, resolution)
+    instance_id = _next_instance_id(scene)
+    kg = scene.maps.kg.copy()
+    if scene.objects:
+        materials = scene.packing.unpack_atlas(scene.maps)
+        if name in materials or any(o.name == name for o in scene.objects):
+            raise SceneError(WHERE, "name", f"a name no object or material set of the scene has, got {name!r}")
+        new = SceneObject(name=name, mesh=mesh, material=name, instance_id=instance_id)
+        return pack_scene([*scene.objects, new], {**materials, name: atlas}, kg, scene.cameras)
+    old = "scene" if name != "scene" else "scene_"  # the v1 atlas's set name, never the new one's
+    validate_objects([SceneObject(name=name, mesh=mesh, material=name)], {name: atlas}, WHERE)
+    packing = layout({old: scene.maps.atlas_shape, name: atlas.atlas_shape})
+    packed = packing.pack_atlas({old: scene.maps.atlas, name: atlas})
+    maps = Maps(**{m: getattr(packed, m) for m in ATLAS_MAPS}, kg=kg)
+    return Scene(
+        mesh=_concatenate(scene.mesh, mesh, packing, old, name, instance_id), maps=maps, cameras=list(scene.cameras)
+    )
+
+
+def _concatenate(base: Mesh, added: Mesh, packing, base_set: str, added_set: str, instance_id: int) -> Mesh:
+    """`base` then `added`, each one's UVs moved into its set's rectangle; sidedness kept (the
+    added object emits on both sides, as a v1 scene's faces do)."""
+    count = len(base.faces), len(added.faces)
+    ids = base.instance_ids if base.instance_ids is not None else np.zeros(count[0], np.int32)
+    one_sided = None
+    if base.one_sided is not None:
+        one_sided = np.concatenate([np.asarray(base.one_sided, bool), np.zeros(count[1], bool)])
+    return Mesh(
+        positions=np.concatenate([base.positions, added.positions]).astype(np.float32),
+        faces=np.concatenate([base.faces, np.asarray(added.faces, np.int64) + len(base.positions)]).astype(np.int32),
+        uvs=np.concatenate([packing.remap_uvs(base.uvs, base_set), packing.remap_uvs(added.uvs, added_set)]),
+        instance_ids=np.concatenate([ids, np.full(count[1], instance_id, np.int32)]).astype(np.int32),
+        one_sided=one_sided,
+    )
+
+
+def _with_maps(scene: Scene, **changed) -> Scene:
+    """The same scene (mesh, objects, packing, cameras shared) with some maps replaced."""
+    maps = Maps(**{m: changed.get(m, getattr(scene.maps, m)) for m in (*ATLAS_MAPS, "kg")})
+    return replace(scene, maps=maps, cameras=list(scene.cameras), objects=list(scene.objects))
+
+
+def _region(scene: Scene, region, field: str = "region") -> np.ndarray:
+    """An (H, W) bool mask over the packed atlas; None is every texel."""
+    shape = scene.maps.atlas_shape
+    if region is None:
+        return np.ones(shape, bool)
+    mask = np.asarray(region)
+    if mask.shape != tuple(shape) or mask.dtype != bool:
+        raise SceneError(
+            WHERE, field, f"a bool mask of the atlas's shape {tuple(shape)}, got {mask.dtype} {mask.shape}"
+        )
+    return mask
+
+
+def scale_emission(scene: Scene, factor, region=None) -> Scene:
+    """Relight: ke *= factor (a number >= 0, or an RGB triple) on `region` (all texels if None)."""
+    scale = np.asarray(factor, np.float32)
+    if scale.shape not in {(), (3,)} or not np.all(np.isfinite(scale)) or np.any(scale < 0):
+        raise SceneError(WHERE, "emission_scale", f"a finite number >= 0 or an RGB triple of them, got {factor!r}")
+    mask = _region(scene, region)
+    ke = scene.maps.ke.copy()
+    ke[mask] *= scale
+    return _with_maps(scene, ke=ke)
+
+
+def set_sky(scene: Scene, kg) -> Scene:
+    """A new outdoor radiance kg: a number or an RGB triple (a uniform sky at the scene's cube-map
+    size), or a (6, N, N, 3) cube map of any N."""
+    array = np.asarray(kg, np.float32)
+    if array.ndim == 4:
+        from .cubemap import kg_to_stacked
+
+        if array.shape[0] != 6 or array.shape[1] != array.shape[2] or array.shape[3] != 3:
+            raise SceneError(WHERE, "sky", f"a (6, N, N, 3) cube map, got {array.shape}")
+        return _with_maps(scene, kg=validate_kg(kg_to_stacked(array), WHERE, "sky"))
+    if array.shape not in {(), (3,)}:
+        raise SceneError(WHERE, "sky", f"a number, an RGB triple or a (6, N, N, 3) cube map, got shape {array.shape}")
+    full = np.broadcast_to(array, scene.maps.kg.shape).copy()
+    _check_map("kg", full.reshape(-1, full.shape[2], 3), WHERE, "sky")
+    return _with_maps(scene, kg=full)
+
+
+def edit_material(scene: Scene, region_mask, values: dict) -> Scene:
+    """Set maps (kd, ks, ka, ke, kw: numbers, or RGB triples for kd, ks, ke) on the texels of
+    `region_mask`; the values are checked against the maps' ranges."""
+    unknown = sorted(set(values) - set(ATLAS_MAPS))
+    if unknown or not values:
+        raise SceneError(WHERE, "values", f"some of the maps {list(ATLAS_MAPS)}, got {sorted(values)}")
+    mask = _region(scene, region_mask)
+    changed = {}
+    for name, value in values.items():
+        array = getattr(scene.maps, name).copy()
+        array[mask] = _material_value(name, value, (1, 1), f"values.{name}")[0, 0]
+        changed[name] = array
+    return _with_maps(scene, **changed)
+
+
+def emitter_regions(scene: Scene, threshold: float = 0.0) -> tuple[np.ndarray, int]:
+    """(labels, count): the 8-connected regions of atlas texels whose largest ke channel is above
+    `threshold`, labelled 1..count in raster order (row by row from the top); 0 is not emitting.
+    A v2 scene's padding texels repeat their set's edge, so they join their set's regions."""
+    emitting = (scene.maps.ke.max(-1) > threshold).astype(np.uint8)
+    count, labels = cv2.connectedComponents(emitting, connectivity=8, ltype=cv2.CV_32S)
+    # OpenCV's label order depends on its algorithm: number them by first texel in raster order.
+    flat = labels.ravel()
+    first = np.unique(flat, return_index=True)[1][1:]  # first texel of labels 1..count-1
+    order = np.zeros(count, np.int32)
+    order[flat[np.sort(first)]] = np.arange(1, count, dtype=np.int32)
+    return order[labels], int(count - 1)
