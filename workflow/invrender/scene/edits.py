@@ -4,9 +4,9 @@ Every edit takes a `Scene` (v1 or v2) and returns a new one; the input is left u
 arrays are copied where they change, shared where they do not). The renderer reads
 `scene.mesh` and `scene.maps` (one mesh, one packed atlas), and so the edits work on those:
 
-- an inserted object becomes a material set of its own, packed beside the scene's texels by
-  `scene/packing.py` (a v2 scene keeps its objects and gains one; a v1 scene's atlas is treated
-  as one set, so the result is again one mesh and one atlas);
+- an inserted object becomes an object with a material set of its own, packed beside the
+  scene's sets by `scene/packing.py`: the result is a v2 scene (a v1 scene's mesh and atlas
+  become its object "scene" and set "scene"), so edits compose and `write_scene` writes them;
 - regions are (H, W) bool masks over the packed atlas; `emitter_regions` names the connected
   groups of emitting texels, so that "switch off lamp 2" can be said. One lamp whose surface is
   cut into several charts of the atlas is several regions.
@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from .format import _check_map, validate_kg
-from .packing import layout, pack_scene, validate_objects
+from .packing import pack_scene
 from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 
 __all__ = [
@@ -100,45 +100,39 @@ def _next_instance_id(scene: Scene) -> int:
 
 
 def insert_object(scene: Scene, mesh: Mesh, material: dict, name: str = "inserted", resolution: int = 8) -> Scene:
-    """A new scene: `scene` plus `mesh` (world space, UVs in [0, 1]) with a uniform material in a
-    resolution^2 material set of its own and a new instance id (one above the largest), so that
-    its pixels can be told apart. A v2 scene gains an object and a set named `name`; a v1 scene's
-    atlas is packed as one set beside the new one (scene/packing.py), its UVs moved into it. The
-    cameras and kg are kept."""
+    """A new v2 scene: `scene` plus `mesh` (world space, UVs in [0, 1]) as an object `name` with
+    a uniform material in a resolution^2 material set of its own (also `name`) and a new instance
+    id (one above the largest), so that its pixels can be told apart. A v1 scene's mesh and atlas
+    become its object(s) and material set "scene" (`v1_objects`); scene/packing.py lays the sets
+    out and flattens the objects. The cameras and kg are kept; the input is not changed."""
     atlas = uniform_material(material, resolution)
-    instance_id = _next_instance_id(scene)
-    kg = scene.maps.kg.copy()
     if scene.objects:
-        materials = scene.packing.unpack_atlas(scene.maps)
-        if name in materials or any(o.name == name for o in scene.objects):
-            raise SceneError(WHERE, "name", f"a name no object or material set of the scene has, got {name!r}")
-        new = SceneObject(name=name, mesh=mesh, material=name, instance_id=instance_id)
-        return pack_scene([*scene.objects, new], {**materials, name: atlas}, kg, scene.cameras)
-    old = "scene" if name != "scene" else "scene_"  # the v1 atlas's set name, never the new one's
-    validate_objects([SceneObject(name=name, mesh=mesh, material=name)], {name: atlas}, WHERE)
-    packing = layout({old: scene.maps.atlas_shape, name: atlas.atlas_shape})
-    packed = packing.pack_atlas({old: scene.maps.atlas, name: atlas})
-    maps = Maps(**{m: getattr(packed, m) for m in ATLAS_MAPS}, kg=kg)
-    return Scene(
-        mesh=_concatenate(scene.mesh, mesh, packing, old, name, instance_id), maps=maps, cameras=list(scene.cameras)
-    )
+        objects, materials = list(scene.objects), scene.packing.unpack_atlas(scene.maps)
+    else:
+        objects, materials = v1_objects(scene), {V1_SET: scene.maps.atlas}
+    if name in materials or any(o.name == name for o in objects):
+        taken = sorted({*materials, *(o.name for o in objects)})
+        raise SceneError(WHERE, "name", f"a name no object or material set of the scene has ({taken}), got {name!r}")
+    new = SceneObject(name=name, mesh=mesh, material=name, instance_id=_next_instance_id(scene))
+    return pack_scene([*objects, new], {**materials, name: atlas}, scene.maps.kg.copy(), scene.cameras)
 
 
-def _concatenate(base: Mesh, added: Mesh, packing, base_set: str, added_set: str, instance_id: int) -> Mesh:
-    """`base` then `added`, each one's UVs moved into its set's rectangle; sidedness kept (the
-    added object emits on both sides, as a v1 scene's faces do)."""
-    count = len(base.faces), len(added.faces)
-    ids = base.instance_ids if base.instance_ids is not None else np.zeros(count[0], np.int32)
-    one_sided = None
-    if base.one_sided is not None:
-        one_sided = np.concatenate([np.asarray(base.one_sided, bool), np.zeros(count[1], bool)])
-    return Mesh(
-        positions=np.concatenate([base.positions, added.positions]).astype(np.float32),
-        faces=np.concatenate([base.faces, np.asarray(added.faces, np.int64) + len(base.positions)]).astype(np.int32),
-        uvs=np.concatenate([packing.remap_uvs(base.uvs, base_set), packing.remap_uvs(added.uvs, added_set)]),
-        instance_ids=np.concatenate([ids, np.full(count[1], instance_id, np.int32)]).astype(np.int32),
-        one_sided=one_sided,
-    )
+V1_SET = "scene"  # the material set (and object) a v1 scene becomes when an object is inserted
+
+
+def v1_objects(scene: Scene) -> list[SceneObject]:
+    """A v1 scene's mesh as v2 objects over the material set "scene": one object, or, if some of
+    its faces emit one-sided (Mesh.one_sided; v2 says sidedness per object), the two-sided faces
+    as "scene" and the one-sided ones as "scene_one_sided" (same vertices, same texels)."""
+    mesh = scene.mesh
+    one_sided = np.zeros(len(mesh.faces), bool) if mesh.one_sided is None else np.asarray(mesh.one_sided, bool)
+    ids = np.zeros(len(mesh.faces), np.int32) if mesh.instance_ids is None else np.asarray(mesh.instance_ids)
+    parts = [(V1_SET, ~one_sided, "two"), (f"{V1_SET}_one_sided", one_sided, "one")]
+    return [
+        SceneObject(name, Mesh(mesh.positions, mesh.faces[keep], mesh.uvs, ids[keep]), V1_SET, emission_sides=sides)
+        for name, keep, sides in parts
+        if keep.any()
+    ]
 
 
 def _with_maps(scene: Scene, **changed) -> Scene:
@@ -205,13 +199,30 @@ def edit_material(scene: Scene, region_mask, values: dict) -> Scene:
 
 def emitter_regions(scene: Scene, threshold: float = 0.0) -> tuple[np.ndarray, int]:
     """(labels, count): the 8-connected regions of atlas texels whose largest ke channel is above
-    `threshold`, labelled 1..count in raster order (row by row from the top); 0 is not emitting.
-    A v2 scene's padding texels repeat their set's edge, so they join their set's regions."""
+    `threshold`, labelled 1..count in raster order of their first texel (row by row from the
+    top); 0 is not emitting. Regions never join across material sets: a v2 scene is labelled set
+    by set, each set's rectangle with its padding (which repeats the set's edge), so the padding
+    of two neighbouring sets does not bridge their lamps."""
     emitting = (scene.maps.ke.max(-1) > threshold).astype(np.uint8)
-    count, labels = cv2.connectedComponents(emitting, connectivity=8, ltype=cv2.CV_32S)
-    # OpenCV's label order depends on its algorithm: number them by first texel in raster order.
+    labels = np.zeros(emitting.shape, np.int32)
+    for rows, cols in _set_blocks(scene):
+        count, block = cv2.connectedComponents(emitting[rows, cols], connectivity=8, ltype=cv2.CV_32S)
+        labels[rows, cols] = np.where(block > 0, block + labels.max(), 0)
+    # Number them by first texel in raster order (OpenCV's order depends on its algorithm).
     flat = labels.ravel()
-    first = np.unique(flat, return_index=True)[1][1:]  # first texel of labels 1..count-1
-    order = np.zeros(count, np.int32)
-    order[flat[np.sort(first)]] = np.arange(1, count, dtype=np.int32)
-    return order[labels], int(count - 1)
+    present, first = np.unique(flat, return_index=True)
+    present, first = present[present > 0], first[present > 0]
+    order = np.zeros(flat.max() + 1, np.int32)
+    order[present[np.argsort(first)]] = np.arange(1, len(present) + 1, dtype=np.int32)
+    return order[labels], len(present)
+
+
+def _set_blocks(scene: Scene) -> list[tuple[slice, slice]]:
+    """Each material set's texels and padding in the packed atlas (the whole atlas for v1)."""
+    if not scene.objects:
+        return [(slice(None), slice(None))]
+    p = scene.packing.padding
+    return [
+        (slice(r.row - p, r.row + r.height + p), slice(r.col - p, r.col + r.width + p))
+        for r in scene.packing.rects.values()
+    ]
