@@ -304,3 +304,28 @@ def test_spheres_inserted_into_a_room_render_as_in_mitsuba():
     assert np.abs(z).max() < 6.0, f"max |z| {np.abs(z).max():.2f}"
     sigma = np.sqrt(ours["variance"].sum() + theirs_var.sum()) / ours["variance"].size / theirs.mean()
     assert abs(ours["radiance"].mean() / theirs.mean() - 1) < 0.01 + 3 * sigma
+
+
+def test_a_lamp_is_a_piece_of_surface_not_of_atlas():
+    """Two lamps on neighbouring texels of the atlas are two regions; one lamp whose two halves
+    lie in distant texels (two charts) is one region: regions follow the surface in 3D."""
+    lamp_a = quad((-1, 2, 0), (0.2, 0, 0), (0, 0, 0.2))  # two separate quads ...
+    lamp_b = quad((1, 2, 0), (0.2, 0, 0), (0, 0, 0.2))
+    half_1 = quad((0, 2, 1), (0.1, 0, 0), (0, 0, 0.2))  # ... and one lamp of two halves sharing an edge
+    half_2 = quad((0.2, 2, 1), (0.1, 0, 0), (0, 0, 0.2))
+    floor = quad((0, 0, 0), (0, 0, 3), (3, 0, 0))
+    texel = {0: (0.125, 0.875), 1: (0.375, 0.875), 2: (0.125, 0.125), 3: (0.875, 0.125), 4: (0.875, 0.875)}
+    parts = [lamp_a, lamp_b, half_1, half_2, floor]
+    positions = np.concatenate([p for p, _, _ in parts]).astype(np.float32)
+    faces = np.concatenate([f + 4 * i for i, (_, f, _) in enumerate(parts)]).astype(np.int32)
+    uvs = np.concatenate([np.full((4, 2), texel[i]) for i in range(5)]).astype(np.float32)
+    maps = Maps.uniform(size=(4, 4), kd=0.5, ke=0.0, kg=0.0, cube=2)
+    for row, col in ((0, 0), (0, 1), (3, 0), (3, 3)):  # lamp_a, lamp_b side by side; the halves apart
+        maps.ke[row, col] = 5.0
+    maps.ke[1, 2] = 5.0  # an emitting texel no face reads, diagonal to lamp b's: it joins lamp b
+    scene = Scene(mesh_of(positions, faces, uvs), maps)
+    labels, count = emitter_regions(scene)
+    assert count == 3
+    assert labels[0, 0] != labels[0, 1] and labels[3, 0] == labels[3, 3] and labels[1, 2] == labels[0, 1]
+    assert labels[0, 0] == 1 and labels[0, 1] == 2 and labels[3, 0] == 3, "numbered in raster order"
+    assert (labels > 0).sum() == 5 and emitter_regions(scene, threshold=5.0)[1] == 0

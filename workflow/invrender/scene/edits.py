@@ -7,20 +7,19 @@ arrays are copied where they change, shared where they do not). The renderer rea
 - an inserted object becomes an object with a material set of its own, packed beside the
   scene's sets by `scene/packing.py`: the result is a v2 scene (a v1 scene's mesh and atlas
   become its object "scene" and set "scene"), so edits compose and `write_scene` writes them;
-- regions are (H, W) bool masks over the packed atlas; `emitter_regions` names the connected
-  groups of emitting texels, so that "switch off lamp 2" can be said. One lamp whose surface is
-  cut into several charts of the atlas is several regions.
+- regions are (H, W) bool masks over the packed atlas; `emitter_regions` numbers the lamps
+  (connected emitting surfaces) by their texels, so that "switch off lamp 2" can be said.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-import cv2
 import numpy as np
 
 from .format import _check_map, validate_kg
 from .packing import pack_scene
+from .regions import face_texels
 from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 
 __all__ = [
@@ -198,23 +197,74 @@ def edit_material(scene: Scene, region_mask, values: dict) -> Scene:
 
 
 def emitter_regions(scene: Scene, threshold: float = 0.0) -> tuple[np.ndarray, int]:
-    """(labels, count): the 8-connected regions of atlas texels whose largest ke channel is above
-    `threshold`, labelled 1..count in raster order of their first texel (row by row from the
-    top); 0 is not emitting. Regions never join across material sets: a v2 scene is labelled set
-    by set, each set's rectangle with its padding (which repeats the set's edge), so the padding
-    of two neighbouring sets does not bridge their lamps."""
-    emitting = (scene.maps.ke.max(-1) > threshold).astype(np.uint8)
-    labels = np.zeros(emitting.shape, np.int32)
+    """(labels, count): the scene's lamps as regions of atlas texels whose largest ke channel is
+    above `threshold`, labelled 1..count in raster order of their first texel (row by row from
+    the top); 0 is a texel that does not emit (or that no face reads).
+
+    A region is a connected piece of emitting *surface*: the faces that read an emitting texel
+    (scene/regions.face_texels, the rule the exports use), joined when they share a vertex
+    position, and the texels they read. Connectivity in the atlas alone would not do: an
+    unwrapper packs the charts of two lamps side by side and the dilated borders join them, while
+    one lamp cut into several charts is one lamp. Emitting texels no face reads (a chart's dilated
+    border, a packed set's padding) join the region of an emitting neighbour in their own set."""
+    mesh, shape = scene.mesh, scene.maps.atlas_shape
+    emitting = scene.maps.ke.max(-1) > threshold
+    face_ids, texel_ids = face_texels(mesh.uvs, mesh.faces, shape)
+    keep = emitting.ravel()[texel_ids]
+    face_ids, texel_ids = face_ids[keep], texel_ids[keep]
+    component = _surface_components(mesh, np.unique(face_ids))
+    labels = np.full(emitting.size, -1, np.int64)
+    np.maximum.at(labels, texel_ids, component[face_ids])  # a texel two lamps share: the later one
+    labels = labels.reshape(shape)
     for rows, cols in _set_blocks(scene):
-        count, block = cv2.connectedComponents(emitting[rows, cols], connectivity=8, ltype=cv2.CV_32S)
-        labels[rows, cols] = np.where(block > 0, block + labels.max(), 0)
-    # Number them by first texel in raster order (OpenCV's order depends on its algorithm).
+        labels[rows, cols] = _grow_labels(labels[rows, cols], emitting[rows, cols])
+    # 1..count by first texel in raster order
     flat = labels.ravel()
     present, first = np.unique(flat, return_index=True)
-    present, first = present[present > 0], first[present > 0]
-    order = np.zeros(flat.max() + 1, np.int32)
-    order[present[np.argsort(first)]] = np.arange(1, len(present) + 1, dtype=np.int32)
-    return order[labels], len(present)
+    present, first = present[present >= 0], first[present >= 0]
+    order = np.zeros(int(flat.max()) + 2, np.int32)
+    order[present[np.argsort(first)] + 1] = np.arange(1, len(present) + 1, dtype=np.int32)
+    return order[labels + 1], len(present)
+
+
+def _surface_components(mesh: Mesh, faces: np.ndarray) -> np.ndarray:
+    """(F,) the connected component of each of `faces` (-1 elsewhere): faces are joined by a
+    vertex position they share (a UV seam's two vertices are one point)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    out = np.full(len(mesh.faces), -1, np.int64)
+    if not len(faces):
+        return out
+    _, welded = np.unique(np.asarray(mesh.positions), axis=0, return_inverse=True)
+    corners = welded.ravel()[np.asarray(mesh.faces)[faces]].ravel()
+    n, v = len(faces), int(welded.max()) + 1
+    rows = np.repeat(np.arange(n), 3)  # face node i -- vertex node n + corner: faces meet at vertices
+    graph = coo_matrix((np.ones(3 * n), (rows, n + corners)), shape=(n + v, n + v))
+    _, component = connected_components(graph, directed=False)
+    out[faces] = component[:n]
+    return out
+
+
+def _grow_labels(labels: np.ndarray, emitting: np.ndarray) -> np.ndarray:
+    """Give unlabelled (-1) emitting texels the label of a labelled 8-neighbour, pass after pass
+    through emitting texels only, until none is left or none changes."""
+    labels = labels.copy()
+    h, w = labels.shape
+    while True:
+        todo = emitting & (labels < 0)
+        if not todo.any():
+            return labels
+        padded = np.pad(labels, 1, constant_values=-1)
+        grown = labels.copy()
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                neighbour = padded[1 + dr : 1 + dr + h, 1 + dc : 1 + dc + w]
+                take = todo & (grown < 0) & (neighbour >= 0)
+                grown[take] = neighbour[take]
+        if np.array_equal(grown, labels):
+            return labels
+        labels = grown
 
 
 def _set_blocks(scene: Scene) -> list[tuple[slice, slice]]:
