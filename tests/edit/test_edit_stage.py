@@ -29,6 +29,12 @@ def room_dirs(tmp_path_factory):
     write_scene(root / "room", scene, metadata)
     scene.maps.kg[:] = 0.0
     write_scene(root / "lamps_only", scene, metadata)
+    # The same room in another atlas, upside down: its lamps come in the other raster order.
+    other, metadata = make_room(ROOM | {"atlas_resolution": 96})
+    other.mesh.uvs[:, 1] = 1.0 - other.mesh.uvs[:, 1]
+    for name in ("kd", "ks", "ka", "ke", "kw"):
+        setattr(other.maps, name, np.ascontiguousarray(getattr(other.maps, name)[::-1]))
+    write_scene(root / "room_96", other, metadata)
     return root
 
 
@@ -100,6 +106,23 @@ def test_a_room_with_its_lamps_and_sky_off_is_black_and_twice_the_emission_is_tw
         # The same paths with every emitted radiance doubled (light sampling is by relative power).
         np.testing.assert_allclose(two[stem], 2 * one[stem], rtol=1e-5, atol=1e-7)
     assert 0.1 < sum(h.mean() for h in half.values()) / sum(o.mean() for o in one.values()) < 0.9
+
+
+def test_an_emitter_is_carried_to_the_truth_by_its_place_in_the_room(room_dirs, tmp_path):
+    """A truth with another atlas numbers its lamps its own way: each chosen lamp is the truth's
+    lamp at the same place, and switching it off there darkens the truth as much."""
+    edits = [{"name": f"off{i}", "kind": "relight", "emission_scale": 0.0, "emitters": [i]} for i in (1, 2)]
+    out = tmp_path / "edits"
+    summary = run(room_dirs / "room", edits, out, truth_dir=room_dirs / "room_96", spp=16, progress=False)
+    for entry in summary:
+        mine = {r["region"]: r["centroid"] for r in entry["scene"]["emitter_regions"]}
+        theirs = {r["region"]: r["centroid"] for r in entry["truth"]["emitter_regions"]}
+        ((chosen,), (matched,)) = entry["scene"]["scaled"], entry["truth"]["scaled"]
+        assert np.linalg.norm(np.subtract(mine[chosen], theirs[matched])) < 0.01  # lamps 1.8 m apart
+        ours, truth = views(out, entry["name"]), views(out, entry["name"], "_truth")
+        ratio = sum(o.mean() for o in ours.values()) / sum(t.mean() for t in truth.values())
+        assert abs(ratio - 1) < 0.1, ratio  # two atlases of one room: the same light, within texel detail
+    assert [e["truth"]["scaled"] for e in summary] == [[2], [1]], "numbered the other way round"
 
 
 def test_bad_edit_lists_are_refused_with_one_line_before_any_render(room_dirs, tmp_path, capsys):

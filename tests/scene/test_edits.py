@@ -17,6 +17,7 @@ from invrender.scene.edits import (
     edit_material,
     emitter_regions,
     insert_object,
+    region_surfaces,
     scale_emission,
     set_sky,
     sphere_mesh,
@@ -329,3 +330,6 @@ def test_a_lamp_is_a_piece_of_surface_not_of_atlas():
     assert labels[0, 0] != labels[0, 1] and labels[3, 0] == labels[3, 3] and labels[1, 2] == labels[0, 1]
     assert labels[0, 0] == 1 and labels[0, 1] == 2 and labels[3, 0] == 3, "numbered in raster order"
     assert (labels > 0).sum() == 5 and emitter_regions(scene, threshold=5.0)[1] == 0
+    areas, centroids = region_surfaces(scene, labels, count)  # the quads' own areas and centres
+    np.testing.assert_allclose(areas, [0.16, 0.16, 0.16], rtol=1e-6)
+    np.testing.assert_allclose(centroids, [[-1, 2, 0], [1, 2, 0], [0.1, 2, 1]], atol=1e-6)

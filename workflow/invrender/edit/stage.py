@@ -36,6 +36,7 @@ from ..scene.edits import (
     edit_material,
     emitter_regions,
     insert_object,
+    region_surfaces,
     scale_emission,
     set_sky,
     sphere_mesh,
@@ -55,7 +56,8 @@ BORDER_TEXELS = 2  # a material edit also sets this many rings of empty texels a
 
 @dataclass
 class Subject:
-    """A scene the edits apply to ("scene" or "truth"), and what the plans learn of it once."""
+    """A scene the edits apply to ("scene" or "truth"), and what the plans learn of it once
+    (texels' 3D points for material boxes, emitter regions for relights)."""
 
     role: str
     directory: Path
@@ -72,16 +74,19 @@ class Subject:
 
     @property
     def emitters(self) -> tuple[np.ndarray, int, list[dict]]:
-        """(labels, count, one record per region: number, texels, centroid of its surface)."""
+        """(labels, count, one record per region: number, texels, surface area and centroid)."""
         if self._emitters is None:
             labels, count = emitter_regions(self.scene)
-            covered = self.texels.mask & (labels > 0)
-            weight = np.bincount(labels[covered], minlength=count + 1)
-            sums = [np.bincount(labels[covered], self.texels.position[covered][:, a], count + 1) for a in range(3)]
-            regions = []
-            for i in range(1, count + 1):
-                centroid = [float(s[i] / weight[i]) for s in sums] if weight[i] else None
-                regions.append({"region": i, "texels": int((labels == i).sum()), "centroid": centroid})
+            areas, centroids = region_surfaces(self.scene, labels, count)
+            regions = [
+                {
+                    "region": i + 1,
+                    "texels": int((labels == i + 1).sum()),
+                    "area_m2": float(areas[i]),
+                    "centroid": None if np.isnan(centroids[i]).any() else centroids[i].tolist(),
+                }
+                for i in range(count)
+            ]
             self._emitters = (labels, count, regions)
         return self._emitters
 

@@ -31,6 +31,7 @@ __all__ = [
     "set_sky",
     "edit_material",
     "emitter_regions",
+    "region_surfaces",
 ]
 
 # An inserted object's material where a key is not given: black, not shiny, not emitting, and the
@@ -225,6 +226,23 @@ def emitter_regions(scene: Scene, threshold: float = 0.0) -> tuple[np.ndarray, i
     order = np.zeros(int(flat.max()) + 2, np.int32)
     order[present[np.argsort(first)] + 1] = np.arange(1, len(present) + 1, dtype=np.int32)
     return order[labels + 1], len(present)
+
+
+def region_surfaces(scene: Scene, labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(areas (count,) in m^2, centroids (count, 3) in meters, NaN for a region no face reads) of
+    the surface under each region of `labels` (from `emitter_regions`): every face that reads a
+    texel of region i, once, weighted by its area. Independent of the atlas's resolution, so two
+    atlases of one room place their lamps alike."""
+    mesh = scene.mesh
+    face_ids, texel_ids = face_texels(mesh.uvs, mesh.faces, labels.shape)
+    region = np.asarray(labels).ravel()[texel_ids]
+    pairs = np.unique(np.stack([face_ids, region], 1)[region > 0], axis=0)  # (face, region) once each
+    tri = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.faces)[pairs[:, 0]]]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = np.bincount(pairs[:, 1], area, count + 1)[1:]
+    sums = np.stack([np.bincount(pairs[:, 1], area * tri[:, :, a].mean(1), count + 1)[1:] for a in range(3)], 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return areas, np.where(areas[:, None] > 0, sums / areas[:, None], np.nan)
 
 
 def _surface_components(mesh: Mesh, faces: np.ndarray) -> np.ndarray:
