@@ -51,6 +51,7 @@ from .spec import check_edits, edit_view, read_edits
 log = logging.getLogger(__name__)
 
 KIND = "edit"  # the output directory's marker
+MAX_BOUNCES = 64
 BORDER_TEXELS = 2  # a material edit also sets this many rings of empty texels around its region
 
 
@@ -119,6 +120,8 @@ def run(
     spp = require_positive("edit --spp", "samples per pixel", spp)
     if max_bounces is not None:
         max_bounces = require_positive("edit --max-bounces", "bounces", max_bounces, minimum=0)
+        if max_bounces > MAX_BOUNCES:  # the kernels' limit (render/features.py)
+            raise SceneError("edit --max-bounces", "bounces", f"at most {MAX_BOUNCES}, got {max_bounces}")
     source = str(edits) if isinstance(edits, (str, Path)) else "config"
     edit_list = check_edits(read_edits(edits) if isinstance(edits, (str, Path)) else edits, source)
     subjects = [Subject("scene", Path(scene_dir), load_scene(scene_dir))]
