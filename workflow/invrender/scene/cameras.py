@@ -45,6 +45,8 @@ __all__ = [
     "panorama_pixels",
     "cube_face_cameras",
     "PANORAMA_MODEL",
+    "look_at",
+    "pinhole_camera",
 ]
 
 log = logging.getLogger(__name__)
@@ -260,6 +262,30 @@ def write_colmap_text(directory, cameras: list[Camera]) -> None:
         pose = np.hstack([np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64).reshape(3, 1)])
         rec.add_image_with_trivial_frame(pycolmap.Image(name=cam.name, camera_id=i, image_id=i), pycolmap.Rigid3d(pose))
     rec.write_text(str(directory))
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """World-to-camera (R, t) of an OpenCV camera at ``eye`` looking at ``target``:
+    z forward, x right, y down (so ``up`` appears upwards in the image)."""
+    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: the view direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])  # rows: camera axes in world coordinates
+    return R, -R @ eye
+
+
+def pinhole_camera(name: str, eye, target, width: int, height: int, fov_deg: float) -> Camera:
+    """A PINHOLE camera with square pixels, ``fov_deg`` horizontal field of view, centred
+    principal point (pixel (0, 0)'s centre at (0.5, 0.5))."""
+    f = 0.5 * width / np.tan(np.radians(fov_deg) / 2)
+    R, t = look_at(eye, target)
+    params = np.array([f, f, width / 2, height / 2], np.float64)
+    return Camera(name=name, model="PINHOLE", width=int(width), height=int(height), params=params, R=R, t=t)
 
 
 def project_points(camera: Camera, points) -> np.ndarray:

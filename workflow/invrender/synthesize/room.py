@@ -12,7 +12,8 @@ texel's 3D point and dilated (``scene.atlas``). Everything follows from the conf
 seed.
 
 This module also holds what the other synthetic scene (``duplicates.py``) shares with it:
-``Material`` / ``bake_materials``, ``sky_cube_map``, ``look_at`` and ``pinhole_camera``.
+``Material`` / ``bake_materials``, ``sky_cube_map``, and (from ``scene/cameras.py``) ``look_at`` and
+``pinhole_camera``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.atlas import bake, rasterize_atlas, unwrap
+from ..scene.cameras import look_at, pinhole_camera
 from ..scene.cubemap import texel_directions
 from ..scene.types import Camera, Maps, Mesh, Scene
 from .primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
@@ -260,28 +262,7 @@ def sky_cube_map(env: dict) -> np.ndarray:
 # ---------------------------------------------------------------------------- cameras
 
 
-def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """World-to-camera (R, t) of an OpenCV camera at ``eye`` looking at ``target``:
-    z forward, x right, y down (so ``up`` appears upwards in the image)."""
-    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError("look_at: the view direction is parallel to up")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])  # rows: camera axes in world coordinates
-    return R, -R @ eye
-
-
-def pinhole_camera(name: str, eye, target, width: int, height: int, fov_deg: float) -> Camera:
-    """A PINHOLE camera with square pixels, ``fov_deg`` horizontal field of view, centred
-    principal point (pixel (0, 0)'s centre at (0.5, 0.5))."""
-    f = 0.5 * width / np.tan(np.radians(fov_deg) / 2)
-    R, t = look_at(eye, target)
-    params = np.array([f, f, width / 2, height / 2], np.float64)
-    return Camera(name=name, model="PINHOLE", width=int(width), height=int(height), params=params, R=R, t=t)
+# look_at and pinhole_camera live in scene/cameras.py (the edit stage places novel cameras too).
 
 
 # ---------------------------------------------------------------------------- the room
