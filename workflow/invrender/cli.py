@@ -147,6 +147,23 @@ def cmd_import_usd(args):
     import_usd(args.usd, args.out, exact=not args.standard_only)
 
 
+def cmd_evaluate(args):
+    from .evaluate import stage
+
+    stage.run(
+        args.scene,
+        args.truth,
+        args.atlas,
+        args.images,
+        args.out,
+        holdout=tuple(args.holdout or ()),
+        snapshots_dir=args.snapshots,
+        spp=args.spp,
+        seed=args.seed,
+        device=args.device,
+    )
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -281,6 +298,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--standard-only", action="store_true", help="ignore the invrender: attributes: the scene other USD tools see"
     )
     p.set_defaults(func=cmd_import_usd)
+
+    p = stages.add_parser("evaluate", help="a recovered scene against the truth -> metrics.json + figures")
+    p.add_argument("--scene", required=True, help="the recovered scene directory")
+    p.add_argument("--truth", required=True, help="the true scene directory (capture/ground_truth/scene)")
+    p.add_argument("--atlas", required=True, help="the recovered atlas' atlas.npz (geometry stage)")
+    p.add_argument("--images", required=True, help="the captured images, named as the cameras' images")
+    p.add_argument("--out", required=True, help="directory to write (metrics.json, figures)")
+    p.add_argument(
+        "--holdout", nargs="+", action="extend", metavar="CAMERA", help="camera names held back from training"
+    )
+    p.add_argument("--snapshots", help="directory of training snapshots iter_XXXXXX.npz")
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_evaluate)
 
     from .bench import BENCHMARKS
 
