@@ -116,14 +116,17 @@ def _candidates(tree: cKDTree, owners: np.ndarray, queries: np.ndarray, radius: 
 
 
 def _nearest(triangles, queries, rows, tris, n) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per query: the candidate triangle with the nearest exact closest point (ties: lowest id)."""
+    """Per query: the candidate triangle with the nearest exact closest point (ties: lowest id);
+    -1 and an infinite distance for a query without candidates."""
+    best_tri = np.full(n, -1, np.int64)
+    best_pt = np.zeros((n, 3))
+    best_d = np.full(n, np.inf)
+    if not len(rows):
+        return best_tri, best_pt, best_d
     points = closest_point(triangles[tris], queries[rows])
     dist = np.linalg.norm(points - queries[rows], axis=1)
     order = np.lexsort((tris, dist, rows))  # by query, then distance, then triangle
     first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]]
-    best_tri = np.full(n, -1, np.int64)
-    best_pt = np.zeros((n, 3))
-    best_d = np.full(n, np.inf)
     best_tri[rows[first]], best_pt[rows[first]], best_d[rows[first]] = tris[first], points[first], dist[first]
     return best_tri, best_pt, best_d
 

@@ -127,7 +127,7 @@ def run(
         novel = None
         if held_out:
             t0 = time.perf_counter()
-            novel, pairs = novel_views(recovered, held_out, images_dir, spp, seed, device)
+            novel, pairs = novel_views(recovered, truth, held_out, images_dir, spp, seed, device)
             novel["spp"] = spp
             for name, (render, captured) in pairs.items():
                 exposure = novel["views"][name]["exposure"]

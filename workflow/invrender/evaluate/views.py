@@ -3,7 +3,7 @@ insertion (MILO section 4.2, Table 3) in the recovered scene against the same in
 
 Insertion: three spheres, a diffuse, a specular and an emitting one (``SPHERES``), are inserted
 into both scenes with ``scene.edits.insert_object`` at the same places, and both scenes are
-rendered from the same cameras with the same seed; the metrics compare the two renders on the
+rendered from the same cameras with independent random numbers; the metrics compare the two renders on the
 truth render's tone mapping (``metrics.py``). Placement, unless the caller gives one: rays through
 SPHERE_PIXELS of the first evaluation camera (fractions of its width and height, the lower middle
 of the view, where floors and table tops are) are cast into the truth scene (``Renderer.aovs``:
@@ -26,9 +26,18 @@ from ..render.renderer import Renderer
 from ..scene.capture import read_view
 from ..scene.edits import insert_object, sphere_mesh
 from ..scene.types import Camera, Scene, SceneError
-from .metrics import image_metrics, reference_exposure
+from .metrics import image_metrics
 
-__all__ = ["SPHERES", "place_spheres", "insert_spheres", "render_views", "novel_views", "insertion"]
+__all__ = [
+    "SPHERES",
+    "place_spheres",
+    "insert_spheres",
+    "renderer_for",
+    "render_all",
+    "render_views",
+    "novel_views",
+    "insertion",
+]
 
 log = logging.getLogger(__name__)
 
@@ -105,29 +114,58 @@ def insert_spheres(scene: Scene, placements: list[dict]) -> Scene:
     return scene
 
 
-def render_views(scene: Scene, cameras: list[Camera], spp: int, seed: int, device=None) -> dict[str, np.ndarray]:
-    """Linear radiance of each camera, rendered with the features the scene calls for; the
-    scene's cameras become ``cameras``, so two scenes rendered this way use the same ray ids."""
+def renderer_for(scene: Scene, cameras: list[Camera], device=None) -> Renderer:
+    """A renderer of ``scene`` with the features it calls for, its cameras replaced by
+    ``cameras``: two scenes rendered this way give the same pixel the same ray id."""
     scene = replace(scene, cameras=list(cameras))
-    renderer = Renderer(scene, analyse(scene, device=device), device=device)
-    return {c.name: renderer.render(c, spp=spp, seed=seed, aovs=False)["radiance"] for c in cameras}
+    return Renderer(scene, analyse(scene, device=device), device=device)
 
 
-def novel_views(recovered: Scene, cameras: list[Camera], images_dir, spp: int, seed: int, device=None):
-    """(metrics per view and their means, {name: (render, captured)}) for the held-out views."""
+def render_all(renderer: Renderer, cameras: list[Camera], spp: int, seed: int) -> dict[str, np.ndarray]:
+    """Linear radiance of each camera, with the random numbers of ``evaluation_seed(seed)``."""
+    return {c.name: renderer.render(c, spp=spp, seed=evaluation_seed(seed), aovs=False)["radiance"] for c in cameras}
+
+
+def evaluation_seed(seed: int) -> int:
+    """The kernels' seed of an evaluation render: ``seed`` + 2^32. Captures are rendered with
+    seeds below 2^32 (the synthesize stage's), and the kernels key random numbers by (seed, ray
+    id), so a render of a near-perfect recovery with the capture's seed would repeat the capture's
+    noise and score better than it is; renders that are compared use seeds one apart."""
+    return int(seed) + 2**32
+
+
+def render_views(scene: Scene, cameras: list[Camera], spp: int, seed: int, device=None) -> dict[str, np.ndarray]:
+    return render_all(renderer_for(scene, cameras, device), cameras, spp, seed)
+
+
+def novel_views(recovered: Scene, truth: Scene, cameras: list[Camera], images_dir, spp: int, seed: int, device=None):
+    """(metrics per view and their means, {name: (render, captured)}) for the held-out views.
+
+    Also the truth's floor: the true scene rendered the same way against the same captures, the
+    score of a perfect recovery under the render's and the capture's Monte Carlo noise."""
+    captured = {c.name: read_view(images_dir, c) for c in cameras}
     renders = render_views(recovered, cameras, spp, seed, device)
-    pairs = {c.name: (renders[c.name], read_view(images_dir, c)) for c in cameras}
-    per_view = {name: image_metrics(render, captured) for name, (render, captured) in pairs.items()}
-    return summarise(per_view), pairs
+    truths = render_views(truth, cameras, spp, seed + 1, device)
+    pairs = {name: (renders[name], image) for name, image in captured.items()}
+    per_view = {name: image_metrics(render, image) for name, (render, image) in pairs.items()}
+    floor = {name: image_metrics(truths[name], image) for name, image in captured.items()}
+    return summarise(per_view) | {"truth_floor": summarise(floor)["mean"]}, pairs
 
 
 def insertion(recovered: Scene, truth: Scene, cameras, placements, spp: int, seed: int, device=None):
-    """(metrics per view and their means, {name: (recovered render, truth render)})."""
+    """(metrics per view and their means, {name: (recovered render, truth render)}).
+
+    The two scenes are rendered with seeds one apart (independent noise). The noise floor is the
+    same comparison between two renders of the truth, seeds one apart again: the score a perfect
+    recovery gets under Monte Carlo noise at ``spp``."""
     ours = render_views(insert_spheres(recovered, placements), cameras, spp, seed, device)
-    reference = render_views(insert_spheres(truth, placements), cameras, spp, seed, device)
+    truth_renderer = renderer_for(insert_spheres(truth, placements), cameras, device)
+    reference = render_all(truth_renderer, cameras, spp, seed + 1)
+    again = render_all(truth_renderer, cameras, spp, seed + 2)
     pairs = {c.name: (ours[c.name], reference[c.name]) for c in cameras}
-    per_view = {name: image_metrics(a, b, reference_exposure(b)) for name, (a, b) in pairs.items()}
-    return summarise(per_view), pairs
+    per_view = {name: image_metrics(a, b) for name, (a, b) in pairs.items()}
+    floor = {name: image_metrics(again[name], reference[name]) for name in reference}
+    return summarise(per_view) | {"noise_floor": summarise(floor)["mean"]}, pairs
 
 
 def summarise(per_view: dict[str, dict]) -> dict:
