@@ -110,9 +110,10 @@ def _candidates(tree: cKDTree, owners: np.ndarray, queries: np.ndarray, radius: 
         rows.append(todo[done][r])
         tris.append(owners[idx[done][r, c]])
         todo, k = todo[full], k * 2
-    rows, tris = np.concatenate(rows), np.concatenate(tris)
-    pairs = np.unique(np.stack([rows, tris], axis=1), axis=0)
-    return pairs[:, 0], pairs[:, 1]
+    # one int64 key per pair: a 1-D unique, many times faster than np.unique(..., axis=0)
+    span = int(owners.max()) + 1
+    keys = np.unique(np.concatenate(rows) * span + np.concatenate(tris))
+    return keys // span, keys % span
 
 
 def _nearest(triangles, queries, rows, tris, n) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
