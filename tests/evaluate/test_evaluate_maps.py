@@ -20,7 +20,7 @@ from invrender.scene.types import ATLAS_MAPS, Maps, Mesh
 def truth_and_copy():
     truth = small_room()
     copy, texels = rebaked(truth)
-    return truth, copy, texels, correspond(texels, truth.mesh, truth.maps.atlas_shape)
+    return truth, copy, texels, correspond(texels, truth.mesh, truth.maps.atlas_shape, recovered_mesh=copy.mesh)
 
 
 def with_maps(maps: Maps, **changed) -> Maps:
@@ -136,3 +136,21 @@ def test_ball_texels_are_taken_at_an_even_stride():
     assert ball_subset(10, 4).tolist() == [0, 3, 6, 9]
     assert ball_subset(3, 4).tolist() == [0, 1, 2]
     assert ball_subset(5, None).tolist() == [0, 1, 2, 3, 4]
+
+
+def test_a_texel_on_an_edge_shared_with_another_material_reads_its_own_side():
+    # a ceiling quad (faces 0, 1, kd red) beside a lamp quad (faces 2, 3, kd blue), coplanar,
+    # sharing the edge x = 1; the texel sits exactly on that edge but belongs to the lamp
+    ceiling = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], np.float32)
+    positions = np.concatenate([ceiling, ceiling + [1, 0, 0]])
+    faces = np.array([[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]], np.int32)
+    uvs = np.array([[0.05, 0.05], [0.45, 0.05], [0.45, 0.95], [0.05, 0.95]] * 2, np.float32)
+    uvs[4:, 0] += 0.5
+    mesh = Mesh(positions, faces, uvs)
+    kd = np.zeros((8, 8, 3), np.float32)
+    kd[:, :4], kd[:, 4:] = (1, 0, 0), (0, 0, 1)
+    texels = fake_texels([[1.0, 0.0, 0.5]], [[0, 1, 0]])
+    texels.triangle[:] = 3  # the lamp's face whose edge x = 1 holds the point
+    assert correspond(texels, mesh, kd.shape[:2]).truth_values(kd).tolist() == [[1, 0, 0]]  # a tie: lowest id
+    own = correspond(texels, mesh, kd.shape[:2], recovered_mesh=mesh)
+    assert own.truth_values(kd).tolist() == [[0, 0, 1]] and own.distance.tolist() == [0.0]

@@ -110,7 +110,7 @@ def run(
     timings = {}
 
     t0 = time.perf_counter()
-    corr = correspond(texels, truth.mesh, truth.maps.atlas_shape, DEFAULT_SAMPLES, side_margin)
+    corr = correspond(texels, truth.mesh, truth.maps.atlas_shape, DEFAULT_SAMPLES, side_margin, recovered.mesh)
     maps = map_errors(recovered.maps, truth.maps, corr, max_ball_texels)
     maps["correspondence"] = corr.summary()
     timings["maps"] = time.perf_counter() - t0
