@@ -136,8 +136,13 @@ def test_a_given_placement_is_used_and_the_cli_runs_the_stage(inputs, tmp_path):
     assert list(doc["insertion"]["views"]) == ["view_000.exr", "view_001.exr"]  # no hold-out: every camera
     args = ["evaluate", "--scene", inputs["scene"], "--truth", inputs["truth"], "--atlas", inputs["atlas"]]
     args += ["--images", inputs["images"], "--out", tmp_path / "cli", "--holdout", HOLDOUT, "--spp", "2"]
+    args += ["--sphere", "specular", "0.1", "0.4", "0.2", "0.15"]
     assert main([str(a) for a in args]) == 0
-    assert json.loads((tmp_path / "cli" / "metrics.json").read_text())["inputs"]["holdout"] == [HOLDOUT]
+    written = json.loads((tmp_path / "cli" / "metrics.json").read_text())
+    assert written["inputs"]["holdout"] == [HOLDOUT] and written["insertion"]["placement"] == "given"
+    assert written["insertion"]["spheres"] == [
+        {"kind": "specular", "material": SPHERES["specular"], "center": [0.1, 0.4, 0.2], "radius": 0.15}
+    ]
 
 
 def test_bad_input_is_refused_before_any_work(inputs, tmp_path, capsys):

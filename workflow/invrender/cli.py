@@ -161,7 +161,24 @@ def cmd_evaluate(args):
         spp=args.spp,
         seed=args.seed,
         device=args.device,
+        placement=_spheres(args.sphere),
     )
+
+
+def _spheres(values) -> list[dict] | None:
+    """--sphere KIND X Y Z RADIUS (repeatable) -> the stage's placement list (None: automatic)."""
+    from .scene.types import SceneError
+
+    if not values:
+        return None
+    spheres = []
+    for kind, *numbers in values:
+        try:
+            x, y, z, radius = map(float, numbers)
+        except ValueError:
+            raise SceneError("evaluate --sphere", kind, f"four numbers X Y Z RADIUS, got {' '.join(numbers)}") from None
+        spheres.append({"kind": kind, "center": [x, y, z], "radius": radius})
+    return spheres
 
 
 def cmd_bench(args):
@@ -309,6 +326,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--holdout", nargs="+", action="extend", metavar="CAMERA", help="camera names held back from training"
     )
     p.add_argument("--snapshots", help="directory of training snapshots iter_XXXXXX.npz")
+    p.add_argument(
+        "--sphere",
+        nargs=5,
+        action="append",
+        metavar=("KIND", "X", "Y", "Z", "RADIUS"),
+        help="an inserted sphere (diffuse, specular or emitting) in meters, repeatable (default: placed automatically)",
+    )
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
