@@ -98,11 +98,11 @@ def run(
     if not texels.mask.any():
         raise SceneError(atlas_path, "mask", "at least one covered texel")
     held_out = _cameras(recovered, scene_dir, holdout)
-    for camera in held_out:  # every image there and of its camera's size, before any work
-        read_view(images_dir, camera)
     views = held_out or list(recovered.cameras)
     if not views:
         raise SceneError(Path(scene_dir) / SCENE_JSON, "cameras", "cameras to render the inserted objects from")
+    for camera in views:  # every image there and of its camera's size, before any work
+        read_view(images_dir, camera)
     snapshots = list_snapshots(snapshots_dir) if snapshots_dir is not None else []
     for path in snapshots:
         check_snapshot(path, recovered.maps.atlas_shape)
@@ -141,7 +141,7 @@ def run(
 
         t0 = time.perf_counter()
         spheres = placement or place_spheres(truth, views[0], radius_fraction, device)
-        inserted, pairs = insertion(recovered, truth, views, spheres, spp, seed, device)
+        inserted, pairs = insertion(recovered, truth, views, spheres, spp, seed, images_dir, device)
         inserted.update({"spp": spp, "spheres": spheres, "placement": "given" if placement else "automatic"})
         for name, (ours, reference) in pairs.items():
             exposure = inserted["views"][name]["exposure"]

@@ -26,7 +26,7 @@ from ..render.renderer import Renderer
 from ..scene.capture import read_view
 from ..scene.edits import insert_object, sphere_mesh
 from ..scene.types import Camera, Scene, SceneError
-from .metrics import image_metrics
+from .metrics import image_metrics, reference_exposure
 
 __all__ = [
     "SPHERES",
@@ -152,19 +152,22 @@ def novel_views(recovered: Scene, truth: Scene, cameras: list[Camera], images_di
     return summarise(per_view) | {"truth_floor": summarise(floor)["mean"]}, pairs
 
 
-def insertion(recovered: Scene, truth: Scene, cameras, placements, spp: int, seed: int, device=None):
+def insertion(recovered: Scene, truth: Scene, cameras, placements, spp: int, seed: int, images_dir, device=None):
     """(metrics per view and their means, {name: (recovered render, truth render)}).
 
     The two scenes are rendered with seeds one apart (independent noise). The noise floor is the
     same comparison between two renders of the truth, seeds one apart again: the score a perfect
-    recovery gets under Monte Carlo noise at ``spp``."""
+    recovery gets under Monte Carlo noise at ``spp``. The exposure is the captured view's (the
+    scene as photographed, ``metrics.reference_exposure``), not the render's: the inserted lamp
+    would set it and leave the rest of the view dark."""
+    exposure = {c.name: reference_exposure(read_view(images_dir, c)) for c in cameras}
     ours = render_views(insert_spheres(recovered, placements), cameras, spp, seed, device)
     truth_renderer = renderer_for(insert_spheres(truth, placements), cameras, device)
     reference = render_all(truth_renderer, cameras, spp, seed + 1)
     again = render_all(truth_renderer, cameras, spp, seed + 2)
     pairs = {c.name: (ours[c.name], reference[c.name]) for c in cameras}
-    per_view = {name: image_metrics(a, b) for name, (a, b) in pairs.items()}
-    floor = {name: image_metrics(again[name], reference[name]) for name in reference}
+    per_view = {name: image_metrics(a, b, exposure[name]) for name, (a, b) in pairs.items()}
+    floor = {name: image_metrics(again[name], reference[name], exposure[name]) for name in reference}
     return summarise(per_view) | {"noise_floor": summarise(floor)["mean"]}, pairs
 
 
