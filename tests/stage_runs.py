@@ -14,8 +14,18 @@ from invrender.scene.format import load_scene
 # A 2-view, 32 x 24 room: the smallest capture the synthesize stage makes.
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
 STAGES = [
-    "synthesize", "cameras", "geometry", "gradients", "features", "render", "export", "import", "import-usd", "evaluate"
-]  # fmt: skip
+    "synthesize",
+    "cameras",
+    "geometry",
+    "gradients",
+    "features",
+    "render",
+    "export",
+    "import",
+    "import-usd",
+    "edit",
+    "evaluate",
+]
 
 
 def build_inputs(root: Path) -> Path:
@@ -23,6 +33,7 @@ def build_inputs(root: Path) -> Path:
     from objscene import write_room
 
     (root / "room.yaml").write_text(yaml.safe_dump(SMALL_ROOM))
+    (root / "edits.yaml").write_text(yaml.safe_dump([{"name": "dim", "kind": "relight", "emission_scale": 0.5}]))
     assert (
         main(["synthesize", "room", "--out", str(root / "capture"), "--config", str(root / "room.yaml"), "--spp", "4"])
         == 0
@@ -59,6 +70,7 @@ def args(stage: str, root: Path, out: Path) -> list[str]:
         "export": [scene],
         "import": [root / "objroom"],
         "import-usd": [root / "export" / "scene.usda"],
+        "edit": ["--scene", scene, "--edits", root / "edits.yaml", "--spp", "1"],
         "evaluate": ["--scene", scene, "--truth", scene, "--atlas", root / "truth_atlas.npz", "--images"]
         + [capture / "images", "--holdout", "view_000.exr", "--spp", "1"],
     }[stage]

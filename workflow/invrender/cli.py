@@ -70,6 +70,21 @@ def cmd_render(args):
     )
 
 
+def cmd_edit(args):
+    from .edit import stage
+
+    stage.run(
+        args.scene,
+        args.edits,
+        args.out,
+        truth_dir=args.truth,
+        spp=args.spp,
+        seed=args.seed,
+        device=args.device,
+        max_bounces=args.max_bounces,
+    )
+
+
 def cmd_cameras(args):
     from .cameras import stage
 
@@ -230,6 +245,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", action="append", help="render only this camera (repeatable)")
     p.add_argument("--device")
     p.set_defaults(func=cmd_render)
+
+    p = stages.add_parser("edit", help="edit a scene (relight, insert, repaint, novel camera) and render it")
+    p.add_argument("--scene", required=True, help="scene directory (scene.json)")
+    p.add_argument("--edits", required=True, help="YAML or JSON list of edits (docs/edit.md)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--truth", help="the true scene directory: the same edits rendered beside (<camera>_truth.exr)")
+    p.add_argument("--max-bounces", type=int, help="bounce limit (overrides the analysis)")
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_edit)
 
     p = stages.add_parser("cameras", help="a capture's cameras (COLMAP or transforms.json) -> a COLMAP text model")
     p.add_argument("source", help="COLMAP sparse model directory (text or binary) or transforms.json")

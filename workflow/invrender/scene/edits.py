@@ -4,23 +4,22 @@ Every edit takes a `Scene` (v1 or v2) and returns a new one; the input is left u
 arrays are copied where they change, shared where they do not). The renderer reads
 `scene.mesh` and `scene.maps` (one mesh, one packed atlas), and so the edits work on those:
 
-- an inserted object becomes a material set of its own, packed beside the scene's texels by
-  `scene/packing.py` (a v2 scene keeps its objects and gains one; a v1 scene's atlas is treated
-  as one set, so the result is again one mesh and one atlas);
-- regions are (H, W) bool masks over the packed atlas; `emitter_regions` names the connected
-  groups of emitting texels, so that "switch off lamp 2" can be said. One lamp whose surface is
-  cut into several charts of the atlas is several regions.
+- an inserted object becomes an object with a material set of its own, packed beside the
+  scene's sets by `scene/packing.py`: the result is a v2 scene (a v1 scene's mesh and atlas
+  become its object "scene" and set "scene"), so edits compose and `write_scene` writes them;
+- regions are (H, W) bool masks over the packed atlas; `emitter_regions` numbers the lamps
+  (connected emitting surfaces) by their texels, so that "switch off lamp 2" can be said.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-import cv2
 import numpy as np
 
 from .format import _check_map, validate_kg
-from .packing import layout, pack_scene, validate_objects
+from .packing import pack_scene
+from .regions import face_texels
 from .types import ATLAS_MAPS, MAP_CHANNELS, Atlas, Maps, Mesh, Scene, SceneError, SceneObject
 
 __all__ = [
@@ -32,6 +31,7 @@ __all__ = [
     "set_sky",
     "edit_material",
     "emitter_regions",
+    "region_surfaces",
 ]
 
 # An inserted object's material where a key is not given: black, not shiny, not emitting, and the
@@ -100,45 +100,39 @@ def _next_instance_id(scene: Scene) -> int:
 
 
 def insert_object(scene: Scene, mesh: Mesh, material: dict, name: str = "inserted", resolution: int = 8) -> Scene:
-    """A new scene: `scene` plus `mesh` (world space, UVs in [0, 1]) with a uniform material in a
-    resolution^2 material set of its own and a new instance id (one above the largest), so that
-    its pixels can be told apart. A v2 scene gains an object and a set named `name`; a v1 scene's
-    atlas is packed as one set beside the new one (scene/packing.py), its UVs moved into it. The
-    cameras and kg are kept."""
+    """A new v2 scene: `scene` plus `mesh` (world space, UVs in [0, 1]) as an object `name` with
+    a uniform material in a resolution^2 material set of its own (also `name`) and a new instance
+    id (one above the largest), so that its pixels can be told apart. A v1 scene's mesh and atlas
+    become its object(s) and material set "scene" (`v1_objects`); scene/packing.py lays the sets
+    out and flattens the objects. The cameras and kg are kept; the input is not changed."""
     atlas = uniform_material(material, resolution)
-    instance_id = _next_instance_id(scene)
-    kg = scene.maps.kg.copy()
     if scene.objects:
-        materials = scene.packing.unpack_atlas(scene.maps)
-        if name in materials or any(o.name == name for o in scene.objects):
-            raise SceneError(WHERE, "name", f"a name no object or material set of the scene has, got {name!r}")
-        new = SceneObject(name=name, mesh=mesh, material=name, instance_id=instance_id)
-        return pack_scene([*scene.objects, new], {**materials, name: atlas}, kg, scene.cameras)
-    old = "scene" if name != "scene" else "scene_"  # the v1 atlas's set name, never the new one's
-    validate_objects([SceneObject(name=name, mesh=mesh, material=name)], {name: atlas}, WHERE)
-    packing = layout({old: scene.maps.atlas_shape, name: atlas.atlas_shape})
-    packed = packing.pack_atlas({old: scene.maps.atlas, name: atlas})
-    maps = Maps(**{m: getattr(packed, m) for m in ATLAS_MAPS}, kg=kg)
-    return Scene(
-        mesh=_concatenate(scene.mesh, mesh, packing, old, name, instance_id), maps=maps, cameras=list(scene.cameras)
-    )
+        objects, materials = list(scene.objects), scene.packing.unpack_atlas(scene.maps)
+    else:
+        objects, materials = v1_objects(scene), {V1_SET: scene.maps.atlas}
+    if name in materials or any(o.name == name for o in objects):
+        taken = sorted({*materials, *(o.name for o in objects)})
+        raise SceneError(WHERE, "name", f"a name no object or material set of the scene has ({taken}), got {name!r}")
+    new = SceneObject(name=name, mesh=mesh, material=name, instance_id=_next_instance_id(scene))
+    return pack_scene([*objects, new], {**materials, name: atlas}, scene.maps.kg.copy(), scene.cameras)
 
 
-def _concatenate(base: Mesh, added: Mesh, packing, base_set: str, added_set: str, instance_id: int) -> Mesh:
-    """`base` then `added`, each one's UVs moved into its set's rectangle; sidedness kept (the
-    added object emits on both sides, as a v1 scene's faces do)."""
-    count = len(base.faces), len(added.faces)
-    ids = base.instance_ids if base.instance_ids is not None else np.zeros(count[0], np.int32)
-    one_sided = None
-    if base.one_sided is not None:
-        one_sided = np.concatenate([np.asarray(base.one_sided, bool), np.zeros(count[1], bool)])
-    return Mesh(
-        positions=np.concatenate([base.positions, added.positions]).astype(np.float32),
-        faces=np.concatenate([base.faces, np.asarray(added.faces, np.int64) + len(base.positions)]).astype(np.int32),
-        uvs=np.concatenate([packing.remap_uvs(base.uvs, base_set), packing.remap_uvs(added.uvs, added_set)]),
-        instance_ids=np.concatenate([ids, np.full(count[1], instance_id, np.int32)]).astype(np.int32),
-        one_sided=one_sided,
-    )
+V1_SET = "scene"  # the material set (and object) a v1 scene becomes when an object is inserted
+
+
+def v1_objects(scene: Scene) -> list[SceneObject]:
+    """A v1 scene's mesh as v2 objects over the material set "scene": one object, or, if some of
+    its faces emit one-sided (Mesh.one_sided; v2 says sidedness per object), the two-sided faces
+    as "scene" and the one-sided ones as "scene_one_sided" (same vertices, same texels)."""
+    mesh = scene.mesh
+    one_sided = np.zeros(len(mesh.faces), bool) if mesh.one_sided is None else np.asarray(mesh.one_sided, bool)
+    ids = np.zeros(len(mesh.faces), np.int32) if mesh.instance_ids is None else np.asarray(mesh.instance_ids)
+    parts = [(V1_SET, ~one_sided, "two"), (f"{V1_SET}_one_sided", one_sided, "one")]
+    return [
+        SceneObject(name, Mesh(mesh.positions, mesh.faces[keep], mesh.uvs, ids[keep]), V1_SET, emission_sides=sides)
+        for name, keep, sides in parts
+        if keep.any()
+    ]
 
 
 def _with_maps(scene: Scene, **changed) -> Scene:
@@ -204,14 +198,99 @@ def edit_material(scene: Scene, region_mask, values: dict) -> Scene:
 
 
 def emitter_regions(scene: Scene, threshold: float = 0.0) -> tuple[np.ndarray, int]:
-    """(labels, count): the 8-connected regions of atlas texels whose largest ke channel is above
-    `threshold`, labelled 1..count in raster order (row by row from the top); 0 is not emitting.
-    A v2 scene's padding texels repeat their set's edge, so they join their set's regions."""
-    emitting = (scene.maps.ke.max(-1) > threshold).astype(np.uint8)
-    count, labels = cv2.connectedComponents(emitting, connectivity=8, ltype=cv2.CV_32S)
-    # OpenCV's label order depends on its algorithm: number them by first texel in raster order.
+    """(labels, count): the scene's lamps as regions of atlas texels whose largest ke channel is
+    above `threshold`, labelled 1..count in raster order of their first texel (row by row from
+    the top); 0 is a texel that does not emit (or that no face reads).
+
+    A region is a connected piece of emitting *surface*: the faces that read an emitting texel
+    (scene/regions.face_texels, the rule the exports use), joined when they share a vertex
+    position, and the texels they read. Connectivity in the atlas alone would not do: an
+    unwrapper packs the charts of two lamps side by side and the dilated borders join them, while
+    one lamp cut into several charts is one lamp. Emitting texels no face reads (a chart's dilated
+    border, a packed set's padding) join the region of an emitting neighbour in their own set."""
+    mesh, shape = scene.mesh, scene.maps.atlas_shape
+    emitting = scene.maps.ke.max(-1) > threshold
+    face_ids, texel_ids = face_texels(mesh.uvs, mesh.faces, shape)
+    keep = emitting.ravel()[texel_ids]
+    face_ids, texel_ids = face_ids[keep], texel_ids[keep]
+    component = _surface_components(mesh, np.unique(face_ids))
+    labels = np.full(emitting.size, -1, np.int64)
+    np.maximum.at(labels, texel_ids, component[face_ids])  # a texel two lamps share: the later one
+    labels = labels.reshape(shape)
+    for rows, cols in _set_blocks(scene):
+        labels[rows, cols] = _grow_labels(labels[rows, cols], emitting[rows, cols])
+    # 1..count by first texel in raster order
     flat = labels.ravel()
-    first = np.unique(flat, return_index=True)[1][1:]  # first texel of labels 1..count-1
-    order = np.zeros(count, np.int32)
-    order[flat[np.sort(first)]] = np.arange(1, count, dtype=np.int32)
-    return order[labels], int(count - 1)
+    present, first = np.unique(flat, return_index=True)
+    present, first = present[present >= 0], first[present >= 0]
+    order = np.zeros(int(flat.max()) + 2, np.int32)
+    order[present[np.argsort(first)] + 1] = np.arange(1, len(present) + 1, dtype=np.int32)
+    return order[labels + 1], len(present)
+
+
+def region_surfaces(scene: Scene, labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(areas (count,) in m^2, centroids (count, 3) in meters, NaN for a region no face reads) of
+    the surface under each region of `labels` (from `emitter_regions`): every face that reads a
+    texel of region i, once, weighted by its area. Independent of the atlas's resolution, so two
+    atlases of one room place their lamps alike."""
+    mesh = scene.mesh
+    face_ids, texel_ids = face_texels(mesh.uvs, mesh.faces, labels.shape)
+    region = np.asarray(labels).ravel()[texel_ids]
+    pairs = np.unique(np.stack([face_ids, region], 1)[region > 0], axis=0)  # (face, region) once each
+    tri = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.faces)[pairs[:, 0]]]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = np.bincount(pairs[:, 1], area, count + 1)[1:]
+    sums = np.stack([np.bincount(pairs[:, 1], area * tri[:, :, a].mean(1), count + 1)[1:] for a in range(3)], 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return areas, np.where(areas[:, None] > 0, sums / areas[:, None], np.nan)
+
+
+def _surface_components(mesh: Mesh, faces: np.ndarray) -> np.ndarray:
+    """(F,) the connected component of each of `faces` (-1 elsewhere): faces are joined by a
+    vertex position they share (a UV seam's two vertices are one point)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    out = np.full(len(mesh.faces), -1, np.int64)
+    if not len(faces):
+        return out
+    _, welded = np.unique(np.asarray(mesh.positions), axis=0, return_inverse=True)
+    corners = welded.ravel()[np.asarray(mesh.faces)[faces]].ravel()
+    n, v = len(faces), int(welded.max()) + 1
+    rows = np.repeat(np.arange(n), 3)  # face node i -- vertex node n + corner: faces meet at vertices
+    graph = coo_matrix((np.ones(3 * n), (rows, n + corners)), shape=(n + v, n + v))
+    _, component = connected_components(graph, directed=False)
+    out[faces] = component[:n]
+    return out
+
+
+def _grow_labels(labels: np.ndarray, emitting: np.ndarray) -> np.ndarray:
+    """Give unlabelled (-1) emitting texels the label of a labelled 8-neighbour, pass after pass
+    through emitting texels only, until none is left or none changes."""
+    labels = labels.copy()
+    h, w = labels.shape
+    while True:
+        todo = emitting & (labels < 0)
+        if not todo.any():
+            return labels
+        padded = np.pad(labels, 1, constant_values=-1)
+        grown = labels.copy()
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                neighbour = padded[1 + dr : 1 + dr + h, 1 + dc : 1 + dc + w]
+                take = todo & (grown < 0) & (neighbour >= 0)
+                grown[take] = neighbour[take]
+        if np.array_equal(grown, labels):
+            return labels
+        labels = grown
+
+
+def _set_blocks(scene: Scene) -> list[tuple[slice, slice]]:
+    """Each material set's texels and padding in the packed atlas (the whole atlas for v1)."""
+    if not scene.objects:
+        return [(slice(None), slice(None))]
+    p = scene.packing.padding
+    return [
+        (slice(r.row - p, r.row + r.height + p), slice(r.col - p, r.col + r.width + p))
+        for r in scene.packing.rects.values()
+    ]
