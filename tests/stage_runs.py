@@ -8,6 +8,8 @@ from pathlib import Path
 import yaml
 
 from invrender.cli import main
+from invrender.scene.atlas import rasterize_atlas
+from invrender.scene.format import load_scene
 
 # A 2-view, 32 x 24 room: the smallest capture the synthesize stage makes.
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
@@ -22,6 +24,7 @@ STAGES = [
     "import",
     "import-usd",
     "edit",
+    "evaluate",
 ]
 
 
@@ -38,6 +41,8 @@ def build_inputs(root: Path) -> Path:
     assert main(args("geometry", root, root / "geometry")) == 0
     assert main(args("export", root, root / "export")) == 0
     write_room(root / "objroom", lambda path, radiance: None)
+    truth = load_scene(root / "capture" / "ground_truth" / "scene")  # evaluate: the truth as its own recovery
+    rasterize_atlas(truth.mesh, *truth.maps.atlas_shape).save(root / "truth_atlas.npz")
     return root
 
 
@@ -66,5 +71,7 @@ def args(stage: str, root: Path, out: Path) -> list[str]:
         "import": [root / "objroom"],
         "import-usd": [root / "export" / "scene.usda"],
         "edit": ["--scene", scene, "--edits", root / "edits.yaml", "--spp", "1"],
+        "evaluate": ["--scene", scene, "--truth", scene, "--atlas", root / "truth_atlas.npz", "--images"]
+        + [capture / "images", "--holdout", "view_000.exr", "--spp", "1"],
     }[stage]
     return [stage, *map(str, tail), "--out", str(out)]

@@ -162,6 +162,40 @@ def cmd_import_usd(args):
     import_usd(args.usd, args.out, exact=not args.standard_only)
 
 
+def cmd_evaluate(args):
+    from .evaluate import stage
+
+    stage.run(
+        args.scene,
+        args.truth,
+        args.atlas,
+        args.images,
+        args.out,
+        holdout=tuple(args.holdout or ()),
+        snapshots_dir=args.snapshots,
+        spp=args.spp,
+        seed=args.seed,
+        device=args.device,
+        placement=_spheres(args.sphere),
+    )
+
+
+def _spheres(values) -> list[dict] | None:
+    """--sphere KIND X Y Z RADIUS (repeatable) -> the stage's placement list (None: automatic)."""
+    from .scene.types import SceneError
+
+    if not values:
+        return None
+    spheres = []
+    for kind, *numbers in values:
+        try:
+            x, y, z, radius = map(float, numbers)
+        except ValueError:
+            raise SceneError("evaluate --sphere", kind, f"four numbers X Y Z RADIUS, got {' '.join(numbers)}") from None
+        spheres.append({"kind": kind, "center": [x, y, z], "radius": radius})
+    return spheres
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -315,6 +349,28 @@ def build_parser() -> argparse.ArgumentParser:
         "--standard-only", action="store_true", help="ignore the invrender: attributes: the scene other USD tools see"
     )
     p.set_defaults(func=cmd_import_usd)
+
+    p = stages.add_parser("evaluate", help="a recovered scene against the truth -> metrics.json + figures")
+    p.add_argument("--scene", required=True, help="the recovered scene directory")
+    p.add_argument("--truth", required=True, help="the true scene directory (capture/ground_truth/scene)")
+    p.add_argument("--atlas", required=True, help="the recovered atlas' atlas.npz (geometry stage)")
+    p.add_argument("--images", required=True, help="the captured images, named as the cameras' images")
+    p.add_argument("--out", required=True, help="directory to write (metrics.json, figures)")
+    p.add_argument(
+        "--holdout", nargs="+", action="extend", metavar="CAMERA", help="camera names held back from training"
+    )
+    p.add_argument("--snapshots", help="directory of training snapshots iter_XXXXXX.npz")
+    p.add_argument(
+        "--sphere",
+        nargs=5,
+        action="append",
+        metavar=("KIND", "X", "Y", "Z", "RADIUS"),
+        help="an inserted sphere (diffuse, specular or emitting) in meters, repeatable (default: placed automatically)",
+    )
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_evaluate)
 
     from .bench import BENCHMARKS
 

@@ -1,0 +1,89 @@
+"""Parameter-map errors against the truth, measured on the surface (MILO section 4.1).
+
+- Atlas maps (kd, ks, ka, ke, kw): the recovered texel against the truth texel at the same 3D
+  point (``correspond.py``), over the recovered atlas' covered texels; MSE over texels and
+  channels.
+- kg: over directions. Both cube maps are read on the finer of the two (a texel of the coarser
+  one by nearest-texel lookup of the finer texel's centre direction, the renderer's lookup, which
+  is exact when one size divides the other), each texel weighted by its solid angle, so the MSE
+  is a mean over the sphere of directions, not over the cube's unevenly sized texels.
+- Light maps MSE (the paper's 0.002): the mean of the ke, kw and kg MSEs.
+- Material MSE (the paper's 0.015): shading balls (``balls.py``) of (kd, ks, ka), over at most
+  ``max_ball_texels`` covered texels taken at an even stride (all of them if fewer).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene.cubemap import as_cube, cube_texel_solid_angles, lookup_cube, texel_directions
+from ..scene.types import ATLAS_MAPS
+from .balls import BALL_LIGHTS, BALL_SIZE, ball_errors
+from .correspond import Correspondence
+from .metrics import mse
+
+__all__ = ["kg_on_common_cube", "kg_mse", "map_errors", "truth_in_recovered_layout", "DEFAULT_BALL_TEXELS"]
+
+DEFAULT_BALL_TEXELS = 65_536  # about 6 s of shading balls on this machine's CPU
+LIGHT_MAPS = ("ke", "kw", "kg")
+MATERIAL_MAPS = ("kd", "ks", "ka")
+
+
+def kg_on_common_cube(recovered, truth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Both cube maps on the finer one's texels, and those texels' solid angles (6, N, N)."""
+    recovered, truth = as_cube(recovered), as_cube(truth)
+    n = max(recovered.shape[1], truth.shape[1])
+    directions = texel_directions(n)
+    on_n = lambda kg: kg if kg.shape[1] == n else lookup_cube(kg, directions)
+    weights = np.broadcast_to(cube_texel_solid_angles(n), (6, n, n))
+    return on_n(recovered), on_n(truth), weights
+
+
+def kg_mse(recovered, truth) -> float:
+    """MSE of two kg cube maps over the sphere of directions (solid-angle weighted)."""
+    a, b, weights = kg_on_common_cube(recovered, truth)
+    return mse(a, b, weights)
+
+
+def ball_subset(count: int, limit: int | None) -> np.ndarray:
+    """Indices of at most ``limit`` of ``count`` texels at an even stride (all if limit is None)."""
+    if limit is None or count <= limit:
+        return np.arange(count)
+    return np.linspace(0, count - 1, int(limit)).round().astype(np.int64)
+
+
+def map_errors(recovered_maps, truth_maps, corr: Correspondence, max_ball_texels: int | None = DEFAULT_BALL_TEXELS):
+    """The metrics of the module docstring, as a JSON-ready dict."""
+    mask = corr.mask
+    rec = {name: np.asarray(getattr(recovered_maps, name))[mask] for name in ATLAS_MAPS}
+    true = {name: corr.truth_values(getattr(truth_maps, name)) for name in ATLAS_MAPS}
+    per_map = {name: mse(rec[name], true[name]) for name in ATLAS_MAPS}
+    per_map["kg"] = kg_mse(recovered_maps.kg, truth_maps.kg)
+    subset = ball_subset(len(rec["kd"]), max_ball_texels)
+    balls = ball_errors(
+        tuple(rec[name][subset] for name in MATERIAL_MAPS), tuple(true[name][subset] for name in MATERIAL_MAPS)
+    )
+    return {
+        "light_maps_mse": float(np.mean([per_map[name] for name in LIGHT_MAPS])),
+        "material_mse": float(balls.mean()),
+        "map_mse": per_map,
+        "shading_balls": {
+            "texels": int(len(subset)),
+            "of_texels": int(len(rec["kd"])),
+            "size_px": BALL_SIZE,
+            "lights": [{"direction": list(d), "irradiance": e} for d, e in BALL_LIGHTS],
+            "clip": [0.0, 1.0],
+        },
+    }
+
+
+def truth_in_recovered_layout(truth_maps, corr: Correspondence) -> dict[str, np.ndarray]:
+    """Each truth atlas map resampled into the recovered atlas (covered texels; 0 elsewhere): what
+    the map errors compare the recovered maps with, for the figures."""
+    out = {}
+    for name in ATLAS_MAPS:
+        values = corr.truth_values(getattr(truth_maps, name))
+        image = np.zeros(corr.mask.shape + values.shape[1:], np.float32)
+        image[corr.mask] = values
+        out[name] = image
+    return out
