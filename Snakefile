@@ -17,10 +17,14 @@ include: "workflow/rules/synthesize.smk"
 include: "workflow/rules/cameras.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/gradients.smk"
+include: "workflow/rules/milo.smk"
+include: "workflow/rules/bake.smk"
 include: "workflow/rules/truth_scene.smk"
 include: "workflow/rules/features.smk"
 include: "workflow/rules/render.smk"
 include: "workflow/rules/export.smk"
+include: "workflow/rules/evaluate.smk"
+include: "workflow/rules/edit.smk"
 
 
 localrules:

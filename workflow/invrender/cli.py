@@ -135,6 +135,27 @@ def cmd_gradients(args):
     )
 
 
+def cmd_milo(args):
+    from .milo import stage
+
+    stage.run(
+        args.geometry,
+        args.cameras,
+        args.images,
+        args.out,
+        preset=args.preset,
+        overrides=_key_values(args.set),
+        resume=args.resume,
+        device=args.device,
+    )
+
+
+def cmd_bake(args):
+    from .bake import stage
+
+    stage.run(args.maps, args.geometry, args.cameras, args.out, training_path=args.training)
+
+
 def cmd_export(args):
     from .export import stage
 
@@ -310,6 +331,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--device")
     p.set_defaults(func=cmd_gradients)
+
+    p = stages.add_parser("milo", help="train MILO-Net on a capture -> weights.pt, maps.npz, log.csv (rule milo_train)")
+    p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
+    p.add_argument("--cameras", required=True, help="COLMAP model directory or transforms.json")
+    p.add_argument("--images", required=True, help="directory of the captured images, named as the cameras' images")
+    p.add_argument("--out", required=True, help="directory to fill (weights.pt, maps.npz, log.csv, snapshots/, ...)")
+    p.add_argument("--preset", default="demo", help="paper, cpu or demo (docs/milo.md)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
+    p.add_argument(
+        "--resume",
+        choices=["never", "always", "auto"],
+        default="never",
+        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
+        "mismatched one), auto (else start afresh), never",
+    )
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_milo)
+
+    p = stages.add_parser("bake", help="recovered maps + mesh + cameras -> a scene directory")
+    p.add_argument("--maps", required=True, help="maps.npz of the milo stage")
+    p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
+    p.add_argument("--cameras", required=True, help="COLMAP model directory")
+    p.add_argument("--training", help="training.json of the milo stage (recorded in scene.json's metadata)")
+    p.add_argument("--out", required=True, help="scene directory to write")
+    p.set_defaults(func=cmd_bake)
 
     p = stages.add_parser("export", help="a scene directory -> USD (scene.usda, textures/) for other tools")
     p.add_argument("scene", help="scene directory (scene.json)")

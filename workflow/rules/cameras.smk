@@ -1,8 +1,11 @@
 rule cameras:
     """The capture's cameras (COLMAP model, text or binary, or transforms.json), read by the one
-    loader and written back as a COLMAP text model: what every later stage reads."""
+    loader and written back as a COLMAP text model, with images/: each camera's image, checked
+    (size, finite pixels) and linked, or for a panorama its six cube faces. What every later
+    stage reads."""
     input:
-        capture_cameras_input,
+        cameras=capture_cameras_input,
+        images=capture_path("images"),
     output:
         directory("results/{scene}/cameras"),
     log:
@@ -13,9 +16,10 @@ rule cameras:
         "../../envs/geometry.yaml"
     threads: 1
     resources:
-        mem_mb=1000,
+        mem_mb=3000,
         runtime=10,
     params:
         source=capture_cameras,
+        images=lambda wildcards: os.path.join(capture_dir(wildcards), "images"),
     shell:
-        "invrender --log {log} cameras {params.source:q} --out {output}"
+        "invrender --log {log} cameras {params.source:q} --out {output} --images {params.images:q}"

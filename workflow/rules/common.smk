@@ -166,6 +166,13 @@ SYNTHETIC = [name for name in SCENES if is_synthetic(name)]
 CAPTURES = [name for name in SCENES if not is_synthetic(name)]
 
 
+def scenes_pattern(names):
+    """A wildcard constraint matching exactly these scenes (none: a pattern nothing matches), so
+    that two rules writing results/{scene}/scene/ (bake for multiview scenes, truth_scene for
+    the others) never compete for one scene."""
+    return "|".join(re.escape(name) for name in names) or "(?!)"
+
+
 wildcard_constraints:
     scene="|".join(re.escape(name) for name in SCENES),
 
@@ -475,8 +482,23 @@ def _check_capture(name):
     MODE_CHECKS[mode(name)](name, capture)
 
 
+EDITS_SCHEMA = "../schemas/edits.schema.yaml"
+with open(workflow.source_path(EDITS_SCHEMA)) as _schema:
+    _EDITS_VALIDATOR = jsonschema.Draft202012Validator(yaml.safe_load(_schema))
+
+
+def _check_edits(name):
+    """Each scene's edit list against edits.schema.yaml, when the workflow starts (the edit job
+    checks again, with the scene: emitter numbers, boxes, mesh files)."""
+    edits = SCENES[name]["edits"]
+    error = jsonschema.exceptions.best_match(_EDITS_VALIDATOR.iter_errors(edits))
+    if error is not None:
+        raise WorkflowError(schema_message(error, ("scenes", name, "edits")))
+
+
 for _name in SCENES:
     _settle_mode(_name)
+    _check_edits(_name)
 for _name in SYNTHETIC:
     _check_generator_config(_name)
 for _name in CAPTURES:
@@ -502,24 +524,36 @@ def has_mesh(scene):
 _check_device()
 
 
+def recovers(scene):
+    """A multiview scene is recovered by MILO-Net (milo_train, bake); a synthetic scene of
+    another mode still has its truth copied into place (truth_scene) until its stages land."""
+    return mode(scene) == "multiview"
+
+
+MULTIVIEW = [name for name in SCENES if recovers(name)]
+
+
 def scene_targets(scene):
-    """The targets of `all`: each artifact whose stage exists and whose inputs the scene
-    has. Only a synthetic scene has a scene directory (truth_scene's copy of its ground
-    truth) until the stages that recover one land, so only it gets features, renders, export.
-    """
+    """The targets of `all`: each artifact whose stage exists and whose inputs the scene has."""
     results = f"results/{scene}"
     targets = [f"{results}/capture"] if is_synthetic(scene) else []
     if has_cameras(scene):
         targets.append(f"{results}/cameras")
     if has_mesh(scene):
         targets += [f"{results}/geometry", f"{results}/gradients"]
-    if is_synthetic(scene):
+    if recovers(scene):
+        targets.append(f"{results}/milo/weights.pt")
+    if recovers(scene) or is_synthetic(scene):
         targets += [
             f"{results}/scene",
             f"{results}/features.json",
             f"{results}/renders",
             f"{results}/export",
         ]
+        if SCENES[scene]["edits"]:
+            targets.append(f"{results}/edits")
+    if recovers(scene) and is_synthetic(scene):
+        targets.append(f"{results}/report")
     return targets
 
 
@@ -640,13 +674,18 @@ def analysis_options(wildcards):
     )
 
 
-def feature_overrides(wildcards):
-    """`--set key=value` for each forced feature (values as JSON: true, false, 3)."""
-    overrides = config["features"]["overrides"]
+def set_options(settings):
+    """`--set key=value` for each setting, values as JSON (true, 3, ["a"]): the flag of the
+    stages that take overrides (render's features, milo's preset)."""
     return " ".join(
         f"--set {shlex.quote(f'{key}={json.dumps(value)}')}"
-        for key, value in sorted(overrides.items())
+        for key, value in sorted(settings.items())
     )
+
+
+def feature_overrides(wildcards):
+    """`--set key=value` for each forced feature."""
+    return set_options(config["features"]["overrides"])
 
 
 def geometry_options(wildcards):
@@ -676,6 +715,37 @@ def export_options(wildcards):
         poses = f"results/{wildcards.scene}/scene/poses.json"
         options.append(f"--poses {shlex.quote(poses)}")
     return " ".join(options)
+
+
+MILO_RUNTIME = {"demo": 30, "cpu": 300, "paper": 1440}  # minutes a job may run (a cluster's --time)
+
+
+def milo_settings(wildcards):
+    """`--set key=value` for the scene's held-out views and each override of the preset."""
+    return set_options(
+        {"holdout": SCENES[wildcards.scene]["holdout"], **config["milo"]["overrides"]}
+    )
+
+
+def milo_runtime(wildcards):
+    return MILO_RUNTIME[config["milo"]["preset"]]
+
+
+def holdout_options(wildcards):
+    return " ".join(
+        f"--holdout {shlex.quote(name)}" for name in SCENES[wildcards.scene]["holdout"]
+    )
+
+
+def edit_truth(wildcards):
+    """The edit rule's truth: a synthetic scene's capture (its ground_truth/scene), else none."""
+    return capture_dir(wildcards) if is_synthetic(wildcards.scene) else []
+
+
+def edit_truth_option(wildcards):
+    if not is_synthetic(wildcards.scene):
+        return ""
+    return f"--truth {shlex.quote(os.path.join(capture_dir(wildcards), 'ground_truth', 'scene'))}"
 
 
 def device_option(wildcards):

@@ -5,7 +5,6 @@ rule gradients:
     input:
         geometry="results/{scene}/geometry",
         cameras="results/{scene}/cameras",
-        images=capture_path("images"),
     output:
         report(
             directory("results/{scene}/gradients"),
@@ -27,7 +26,6 @@ rule gradients:
         runtime=60,
         gpu=gpu_request,
     params:
-        images=lambda wildcards: os.path.join(capture_dir(wildcards), "images"),
         batch=config["gradients"]["batch"],
         spp=config["gradients"]["spp"],
         seed=config["gradients"]["seed"],
@@ -35,5 +33,5 @@ rule gradients:
         device=device_option,
     shell:
         "invrender --log {log} gradients --geometry {input.geometry} --cameras {input.cameras}"
-        " --images {params.images:q} --out {output} --batch {params.batch} --spp {params.spp}"
+        " --images {input.cameras}/images --out {output} --batch {params.batch} --spp {params.spp}"
         " --seed {params.seed} --accumulation {params.accumulation} {params.device}"

@@ -1,12 +1,12 @@
-# Stands in for the stage that recovers a scene directory from the capture (bake, issue 11, for
-# multiview; the stages of issues 13 and 16 for duplicates and room), until it lands: the
-# synthetic scene's ground truth, copied to where that stage will write. features, render and
-# export read results/{scene}/scene/ whichever rule made it; a capture of the user's own has no
-# truth, so asking for its scene directory stops with a message (synthetic_capture).
+# Stands in for the stages that recover a duplicates or room scene (issues 13 and 16) until they
+# land: the synthetic scene's ground truth, copied to where those stages will write. A multiview
+# scene's directory is recovered (milo_train, bake). features, render and export read
+# results/{scene}/scene/ whichever rule made it; a capture of the user's own has no truth, so
+# asking for its scene directory stops with a message (synthetic_capture).
 rule truth_scene:
     """A synthetic scene's ground truth as its scene directory: a copy of ground_truth/scene/
     (scene.json and the maps), plus the true poses of a duplicates scene's copies (poses.json),
-    standing in for the recovering stage (bake, issue 11) until it lands."""
+    standing in for the recovering stages of those modes until they land."""
     input:
         synthetic_capture,
     output:
@@ -17,6 +17,8 @@ rule truth_scene:
             category="Scene",
             labels={"scene": "{scene}", "file": "{name}.json"},
         ),
+    wildcard_constraints:
+        scene=scenes_pattern([name for name in SCENES if name not in MULTIVIEW]),
     log:
         "results/{scene}/logs/truth_scene.log",
     benchmark:

@@ -71,7 +71,9 @@ def load(path, settings: dict, settings_digest: str, atlas_digest: str) -> dict:
             "(start afresh, or run with the settings it was made with)",
         )
     if state["atlas_hash"] != atlas_digest:
-        raise SceneError(path, "atlas", "the atlas of this run (geometry/atlas.npz); it was made for another mesh or atlas")
+        raise SceneError(
+            path, "atlas", "the atlas of this run (geometry/atlas.npz); it was made for another mesh or atlas"
+        )
     return state
 
 

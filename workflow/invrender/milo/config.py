@@ -28,6 +28,8 @@ _COMMON = {
     "momentum": 0.9,
     "decay": 0.3,  # both learning rates times this ...
     "decay_at": [0.2, 0.4],  # ... at these fractions of the iterations
+    "image_loss": "relative_mse",  # losses.image_loss: relative_mse, mse, or norm (Eq. 5 as written)
+    "loss_epsilon": 1.0,  # relative_mse's epsilon, times the capture's median radiance
     "alpha": 1.0,  # Eq. 11: image
     "beta": 0.003,  # category
     "theta": 0.01,  # texture
@@ -112,17 +114,31 @@ def _typed(default, value, where: str, key: str):
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        raise SceneError(where, f"overrides.{key}", f"a {type(default).__name__} like the preset's {default!r}, got {value!r}")
+        raise SceneError(
+            where, f"overrides.{key}", f"a {type(default).__name__} like the preset's {default!r}, got {value!r}"
+        )
     return value
 
 
 def _check(s: dict, where: str) -> None:
-    positive = ("layers", "width", "iterations", "rays", "spp", "max_bounces", "materials", "checkpoint_every", "snapshot_every")
+    positive = (
+        "layers",
+        "width",
+        "iterations",
+        "rays",
+        "spp",
+        "max_bounces",
+        "materials",
+        "checkpoint_every",
+        "snapshot_every",
+    )
     for key in positive:
         if s[key] < 1:
             raise SceneError(where, key, f"a positive integer, got {s[key]!r}")
     if s["template"] and not 0 <= s["emitters"] <= s["materials"] - 2:
-        raise SceneError(where, "emitters", f"0 .. materials - 2 (one window and one normal material besides), got {s['emitters']}")
+        raise SceneError(
+            where, "emitters", f"0 .. materials - 2 (one window and one normal material besides), got {s['emitters']}"
+        )
     if not 0 <= s["skip_layers"] < s["layers"]:
         raise SceneError(where, "skip_layers", f"0 .. layers - 1, got {s['skip_layers']}")
     if not 0 < s["regularised_fraction"] <= 1:

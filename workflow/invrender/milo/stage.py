@@ -30,6 +30,7 @@ from ..scene.atomic import atomic_path, claim_dir
 from ..scene.cameras import read_cameras
 from ..scene.capture import read_view
 from ..scene.mesh_io import read_mesh
+from ..scene.snapshots import write_snapshot
 from ..scene.types import Camera, Maps, Scene, SceneError
 from . import checkpoint
 from .config import resolve, settings_hash
@@ -111,13 +112,26 @@ def run(
 
     torch.use_deterministic_algorithms(True)
     emission, sky = capture_scale(views)
-    training = Training(settings, MiloNet(settings, emission, sky), Texels.from_atlas(atlas), renderer, views)
+    training = Training(
+        settings,
+        MiloNet(settings, emission, sky),
+        Texels.from_atlas(atlas),
+        renderer,
+        views,
+        settings["loss_epsilon"] * sky,
+    )
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     _resume(training, out / "checkpoints", resume, settings, digests)
     log.info(
         "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views, from iteration %d",
-        preset, settings["iterations"], settings["rays"], settings["spp"], settings["max_bounces"],
-        len(training.texels), len(train_cams), training.iteration,
+        preset,
+        settings["iterations"],
+        settings["rays"],
+        settings["spp"],
+        settings["max_bounces"],
+        len(training.texels),
+        len(train_cams),
+        training.iteration,
     )
     _loop(training, out, digests, progress)
     return _finish(training, out, digests, preset, emission, sky)
@@ -153,26 +167,16 @@ def _loop(training: Training, out: Path, digests, progress: bool) -> None:
         bar.set_postfix(image=f"{row['image']:.4g}", cat=f"{row['category']:.3g}", tex=f"{row['texture']:.3g}")
         done = training.iteration
         if done % s["snapshot_every"] == 0 or done == s["iterations"]:
-            write_maps(out / "snapshots" / f"iter_{done:06d}.npz", training.predict(), done, training.wall_time)
+            write_snapshot(out / "snapshots" / f"iter_{done:06d}.npz", training.predict(), done, training.wall_time)
         if done % s["checkpoint_every"] == 0 and done < s["iterations"]:
             state = training.state() | {"settings": s, "settings_hash": digests[0], "atlas_hash": digests[1]}
             checkpoint.save(out / "checkpoints", state)
     bar.close()
 
 
-def write_maps(path: Path, maps: Maps, iteration: int, wall_time: float) -> None:
-    """The six maps as one .npz (keys kd ks ka ke kw kg, iteration, wall_time): what bake and
-    evaluate read."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {name: getattr(maps, name) for name in ("kd", "ks", "ka", "ke", "kw", "kg")}
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as handle:
-            np.savez_compressed(handle, **arrays, iteration=iteration, wall_time=wall_time)
-
-
 def _finish(training: Training, out: Path, digests, preset: str, emission: float, sky: float) -> dict:
     maps = training.predict()
-    write_maps(out / "maps.npz", maps, training.iteration, training.wall_time)
+    write_snapshot(out / "maps.npz", maps, training.iteration, training.wall_time)
     summary = {
         "preset": preset,
         "settings": training.settings,

@@ -82,6 +82,7 @@ class Training:
     texels: Texels
     renderer: Renderer
     views: Views
+    loss_epsilon: float = 0.1  # relative_mse's epsilon in radiance units
     iteration: int = 0
     wall_time: float = 0.0
     optimisers: list = field(default_factory=list)
@@ -103,7 +104,9 @@ class Training:
                 torch.optim.SGD(template, lr=s["lr_template"], momentum=s["momentum"], nesterov=True)
             )
         milestones = sorted({max(1, round(f * s["iterations"])) for f in s["decay_at"]})
-        self.schedules = [torch.optim.lr_scheduler.MultiStepLR(o, milestones, gamma=s["decay"]) for o in self.optimisers]
+        self.schedules = [
+            torch.optim.lr_scheduler.MultiStepLR(o, milestones, gamma=s["decay"]) for o in self.optimisers
+        ]
 
     # --- the maps ---------------------------------------------------------------------------
     @torch.no_grad()
@@ -111,10 +114,16 @@ class Training:
         """The six maps the network gives now, at the atlas resolution."""
         t = self.texels
         values = torch.cat(
-            [self.net.surface(t.positions[i : i + CHUNK], t.normals[i : i + CHUNK])["maps"] for i in range(0, len(t), CHUNK)]
+            [
+                self.net.surface(t.positions[i : i + CHUNK], t.normals[i : i + CHUNK])["maps"]
+                for i in range(0, len(t), CHUNK)
+            ]
         ).numpy()
         atlas = t.scatter(values, values.shape[1])
-        maps = {name: atlas[..., c].squeeze(-1) if c.stop - c.start == 1 else atlas[..., c] for name, c in GRAD_CHANNELS.items()}
+        maps = {
+            name: atlas[..., c].squeeze(-1) if c.stop - c.start == 1 else atlas[..., c]
+            for name, c in GRAD_CHANNELS.items()
+        }
         n = self.settings["sky_resolution"]
         kg = self.net.sky(self.directions).numpy().reshape(6, n, n, 3)
         return Maps(**{name: np.ascontiguousarray(maps[name]) for name in ATLAS_MAPS}, kg=kg)
@@ -131,7 +140,7 @@ class Training:
         t_predict = time.perf_counter()
         seed = iteration_seed(s["seed"], it)
         radiance, _, dropped = self.renderer.render_requests(cameras, requests, s["spp"], seed)
-        loss, adjoint = image_loss(radiance, target)
+        loss, adjoint = image_loss(radiance, target, s["image_loss"], self.loss_epsilon)
         t_render = time.perf_counter()
         grads = backward(
             self.renderer, cameras, requests, s["alpha"] * adjoint, s["spp"], backward_seed(seed), s["accumulation"]

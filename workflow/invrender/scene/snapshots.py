@@ -1,6 +1,7 @@
-"""Training snapshots: the six maps every K iterations, with the iteration and the seconds of training.
+"""Maps files: the six maps as one .npz with the iteration and the seconds of training behind them.
 
-A snapshot is ``iter_XXXXXX.npz`` (the training stage writes them) with keys kd (H, W, 3),
+The milo stage writes one every K iterations (``snapshots/iter_XXXXXX.npz``, read by evaluate for
+its accuracy-against-time curve) and its final maps (``maps.npz``, read by bake). Keys kd (H, W, 3),
 ks (H, W, 3), ka (H, W), ke (H, W, 3), kw (H, W), kg (6, N, N, 3), float32, on the recovered
 atlas, and the scalars ``iteration`` and ``wall_time`` (seconds of training up to it).
 """
@@ -13,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scene.types import ATLAS_MAPS, MAP_CHANNELS, Maps, SceneError
+from .atomic import atomic_path
+from .types import ATLAS_MAPS, MAP_CHANNELS, Maps, SceneError
 
-__all__ = ["SNAPSHOT_PATTERN", "SNAPSHOT_KEYS", "list_snapshots", "check_snapshot", "load_snapshot"]
+__all__ = ["SNAPSHOT_PATTERN", "SNAPSHOT_KEYS", "list_snapshots", "check_snapshot", "load_snapshot", "write_snapshot"]
 
 SNAPSHOT_PATTERN = re.compile(r"^iter_(\d{6,})\.npz$")
 SNAPSHOT_KEYS = (*ATLAS_MAPS, "kg", "iteration", "wall_time")
@@ -94,3 +96,13 @@ def _checked(path: Path, name: str, array: np.ndarray, expected: tuple) -> np.nd
     if not np.all(np.isfinite(array)):
         raise SceneError(path, name, "finite values")
     return np.asarray(array, np.float32)
+
+
+def write_snapshot(path, maps: Maps, iteration: int, wall_time: float) -> None:
+    """Write the maps file atomically (a killed run leaves none that looks complete)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {name: np.asarray(getattr(maps, name), np.float32) for name in (*ATLAS_MAPS, "kg")}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, **arrays, iteration=int(iteration), wall_time=float(wall_time))

@@ -1,0 +1,31 @@
+rule bake:
+    """The recovered scene directory: MILO-Net's maps on the geometry stage's mesh and atlas, seen
+    by the capture's cameras; what features, render, export, evaluate and edit read."""
+    input:
+        maps="results/{scene}/milo/maps.npz",
+        training="results/{scene}/milo/training.json",
+        geometry="results/{scene}/geometry",
+        cameras="results/{scene}/cameras",
+    output:
+        report(
+            directory("results/{scene}/scene"),
+            patterns=["{name}.json"],
+            caption="../report/bake.rst",
+            category="Scene",
+            labels={"scene": "{scene}", "file": "{name}.json"},
+        ),
+    wildcard_constraints:
+        scene=scenes_pattern(MULTIVIEW),
+    log:
+        "results/{scene}/logs/bake.log",
+    benchmark:
+        "results/{scene}/benchmarks/bake.tsv"
+    conda:
+        "../../envs/render.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    shell:
+        "invrender --log {log} bake --maps {input.maps} --training {input.training}"
+        " --geometry {input.geometry} --cameras {input.cameras} --out {output}"
