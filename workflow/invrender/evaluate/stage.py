@@ -30,12 +30,12 @@ from ..scene.atlas import AtlasTexels
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.capture import read_view
 from ..scene.format import SCENE_JSON, load_scene
+from ..scene.snapshots import check_snapshot, list_snapshots, load_snapshot
 from ..scene.types import ATLAS_MAPS, Scene, SceneError, require_positive
 from . import figures
 from .correspond import DEFAULT_SAMPLES, DEFAULT_SIDE_MARGIN, correspond
 from .maps import DEFAULT_BALL_TEXELS, kg_on_common_cube, map_errors, truth_in_recovered_layout
 from .metrics import PSNR_CAP_DB, image_metrics
-from ..scene.snapshots import check_snapshot, list_snapshots, load_snapshot
 from .views import DEFAULT_RADIUS_FRACTION, insertion, novel_views, place_spheres, render_views
 
 __all__ = ["run", "PAPER", "METRICS_VERSION"]

@@ -18,17 +18,19 @@ _COMMON = {
     "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)
-    "light_logit_start": 4.0,  # the emitting and window materials' logits start this much lower
+    "hard_materials": True,  # render each texel's most probable material (network.hard_through)
+    "warm_start_steps": 200,  # MLP 1 fitted to the photographs' brightest texels first (importance.py)
+    "warm_start_fraction": 0.3,  # texels seen brighter than this fraction of the brightest start emitting
     "levels_coarse": 10,  # L of gamma_c (MLP 1, the material probabilities)
     "levels_fine": 12,  # L of gamma_f (MLP 2, the detail texture)
     "levels_sky": 6,  # L of the sky directions' encoding (MLP 3)
     "leaky_slope": 0.01,
     "lr_mlp": 1e-3,  # AMSGrad
-    "lr_template": 1e-2,  # SGD with Nesterov momentum
+    "lr_template": 0.1,  # SGD with Nesterov momentum (the paper's 0.01 was for summed losses, docs/milo.md)
     "momentum": 0.9,
     "decay": 0.3,  # both learning rates times this ...
     "decay_at": [0.2, 0.4],  # ... at these fractions of the iterations
-    "image_loss": "relative_mse",  # losses.image_loss: relative_mse, mse, or norm (Eq. 5 as written)
+    "image_loss": "mse",  # losses.image_loss: relative_mse, mse, or norm (Eq. 5 as written)
     "loss_epsilon": 1.0,  # relative_mse's epsilon, times the capture's median radiance
     "alpha": 1.0,  # Eq. 11: image
     "beta": 0.003,  # category
@@ -74,12 +76,12 @@ PRESETS = {
         "layers": 3,
         "width": 64,
         "skip_layers": 1,
-        "iterations": 120,
+        "iterations": 300,
         "rays": 8192,
         "spp": 4,
         "max_bounces": 3,
-        "checkpoint_every": 40,
-        "snapshot_every": 40,
+        "checkpoint_every": 50,
+        "snapshot_every": 50,
     },
 }
 

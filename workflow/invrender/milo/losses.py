@@ -15,7 +15,6 @@ from ..render.adjoint import GRAD_CHANNELS
 from ..render.scene_buffers import LUMINANCE
 from .network import LOWER, UPPER
 
-
 IMAGE_LOSSES = ("relative_mse", "mse", "norm")
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -32,6 +33,19 @@ def clamp_through(values: torch.Tensor) -> torch.Tensor:
     out-of-range values back (section 3.4)."""
     clamped = torch.maximum(torch.minimum(values, UPPER.to(values)), LOWER.to(values))
     return values + (clamped - values).detach()
+
+
+def hard_through(probabilities: torch.Tensor) -> torch.Tensor:
+    """Each texel's most probable material alone (one-hot), with the softmax's gradient.
+
+    Eq. 7 mixes all Q materials by P_i. A light's ke is large (12 in the demo room against albedos
+    below 1), so a wall texel with P = 0.005 on the light material glows at 0.06: the softmax never
+    reaches 0, and that glow trades against kd (the diffuse-emission ambiguity the template is
+    there to remove; measured in docs/milo.md). Rendering the most probable material keeps every
+    texel either emitting or reflecting, as the finite material constraint says; the category
+    loss (Eq. 8) keeps P near one-hot so the straight-through gradient stays close to Eq. 7's."""
+    hard = torch.nn.functional.one_hot(probabilities.argmax(-1), probabilities.shape[-1]).to(probabilities)
+    return hard + probabilities - probabilities.detach()
 
 
 class Encoding(nn.Module):
@@ -94,6 +108,21 @@ class MaterialTemplate(nn.Module):
         self.emitter_ke = nn.Parameter(torch.full((emitters, 3), math.log(emission)))
         self.window_kw = nn.Parameter(torch.full((1, 1), _logit(0.5)))
         self.materials, self.emitters = materials, emitters
+        # Which channels each material may vary (1) and which the constraint fixes (0): the detail
+        # texture of Eq. 9 adds only to the former. Section 3.3: every region either emits (ke,
+        # or kw for the window) or reflects (kd, ks, ka); a detail on ke over a wall is emission
+        # the template forbids, and it trades against kd exactly as a soft P does (docs/milo.md).
+        learnable = torch.zeros(materials, ATLAS_CHANNELS)
+        learnable[:emitters, GRAD_CHANNELS["ke"]] = 1.0
+        learnable[emitters, GRAD_CHANNELS["kw"]] = 1.0
+        for name in ("kd", "ks", "ka"):
+            learnable[emitters + 1 :, GRAD_CHANNELS[name]] = 1.0
+        self.register_buffer("learnable", learnable)
+
+    @torch.no_grad()
+    def start_emission(self, rgb) -> None:
+        rgb = torch.as_tensor(np.asarray(rgb, np.float32))
+        self.emitter_ke.copy_(torch.log(torch.clamp(rgb, min=1e-3)).expand_as(self.emitter_ke))
 
     def forward(self) -> torch.Tensor:
         """(Q, 11): emitters first, then the window, then the normal materials."""
@@ -127,14 +156,13 @@ class MiloNet(nn.Module):
             inputs, outputs, settings["layers"], settings["width"], settings["skip_layers"], settings["leaky_slope"]
         )
         self.uses_template = bool(settings["template"])
+        self.hard_materials = bool(settings["hard_materials"])
         self.coarse = Encoding(settings["levels_coarse"])
         self.sky_encoding = Encoding(settings["levels_sky"])
         surface_inputs = self.coarse.out_features(3) + 3  # gamma_c(x) and the normal
         if self.uses_template:
             self.fine = Encoding(settings["levels_fine"])
             self.material_mlp = mlp(surface_inputs, settings["materials"])  # MLP 1 -> P_i
-            with torch.no_grad():  # most of a room reflects: a texel emits only once the images say so
-                self.material_mlp.last.bias[: settings["emitters"] + 1] -= settings["light_logit_start"]
             self.detail_mlp = mlp(self.fine.out_features(3) + 3, ATLAS_CHANNELS)  # MLP 2 -> k_t
             self.detail_mlp.scale_output(0.01)  # k_t starts near 0: the template explains first
             self.template = MaterialTemplate(settings["materials"], settings["emitters"], emission, generator)
@@ -156,7 +184,9 @@ class MiloNet(nn.Module):
             return {"raw": raw, "maps": clamp_through(raw)}
         probabilities = torch.softmax(self.material_mlp(coarse), -1)
         detail = self.detail_mlp(torch.cat([self.fine(positions), normals], -1))
-        raw = probabilities @ self.template() + detail  # Eq. 7 and 9
+        mixing = hard_through(probabilities) if self.hard_materials else probabilities
+        detail = detail * (mixing @ self.template.learnable)  # no glow painted onto a wall, no albedo onto a lamp
+        raw = mixing @ self.template() + detail  # Eq. 7 and 9
         return {"raw": raw, "maps": clamp_through(raw), "probabilities": probabilities, "detail": detail}
 
     def sky(self, directions: torch.Tensor) -> torch.Tensor:

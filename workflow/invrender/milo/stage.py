@@ -34,6 +34,7 @@ from ..scene.snapshots import write_snapshot
 from ..scene.types import Camera, Maps, Scene, SceneError
 from . import checkpoint
 from .config import resolve, settings_hash
+from .importance import emitting_start, observed_radiance
 from .network import MiloNet
 from .texels import Texels
 from .train import Training, TrainingLog, Views
@@ -105,7 +106,8 @@ def run(
     atlas = AtlasTexels.load(geometry_dir / "atlas.npz")
     mesh = read_mesh(geometry_dir / "mesh.ply")
     train_cams, _ = split_views(read_cameras(cameras_path), settings["holdout"], cameras_path)
-    views = Views.from_images(train_cams, [read_view(images_dir, c) for c in train_cams])
+    images = [read_view(images_dir, c) for c in train_cams]
+    views = Views.from_images(train_cams, images)
     scene = Scene(mesh, Maps.uniform(size=atlas.shape, cube=settings["sky_resolution"]), train_cams)
     renderer = Renderer(scene, training_features(settings), device=device)
     check_cameras_see_mesh(renderer, train_cams, cameras_path)
@@ -119,6 +121,12 @@ def run(
         renderer,
         views,
         settings["loss_epsilon"] * sky,
+    )
+    radiance, seen = observed_radiance(atlas, renderer, train_cams, images)
+    texels = training.texels
+    training.warm_start(
+        texels.gather(emitting_start(radiance, seen, emission, settings["warm_start_fraction"])),
+        texels.gather(radiance),
     )
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     _resume(training, out / "checkpoints", resume, settings, digests)

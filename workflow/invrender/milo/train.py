@@ -108,6 +108,27 @@ class Training:
             torch.optim.lr_scheduler.MultiStepLR(o, milestones, gamma=s["decay"]) for o in self.optimisers
         ]
 
+    def warm_start(self, emitting: np.ndarray, radiance: np.ndarray) -> None:
+        """Start MLP 1 from the photographs (importance.py): texels in `emitting` (per texel, bool)
+        on the first light material, every other texel on the normal materials, by a few Adam
+        steps of cross-entropy; the light material's ke starts at those texels' mean observed
+        radiance (RGB). Training then revises both."""
+        net, s = self.net, self.settings
+        if not net.uses_template or s["warm_start_steps"] == 0:
+            return
+        if emitting.any() and s["emitters"] > 0:
+            net.template.start_emission(radiance[emitting].mean(0))
+        light = torch.from_numpy(emitting)
+        optimiser = torch.optim.Adam(net.material_mlp.parameters(), lr=s["lr_mlp"])
+        inputs = torch.cat([net.coarse(self.texels.positions), self.texels.normals], -1)
+        normal_from = s["emitters"] + 1
+        for _ in range(s["warm_start_steps"]):
+            log_p = torch.log_softmax(net.material_mlp(inputs), -1)
+            loss = -torch.where(light, log_p[:, 0], torch.logsumexp(log_p[:, normal_from:], -1)).mean()
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+
     # --- the maps ---------------------------------------------------------------------------
     @torch.no_grad()
     def predict(self) -> Maps:
