@@ -131,7 +131,7 @@ def run(
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     _resume(training, out / "checkpoints", resume, settings, digests)
     log.info(
-        "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views, from iteration %d",
+        "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views; from %d",
         preset,
         settings["iterations"],
         settings["rays"],
