@@ -61,7 +61,8 @@ def run(tmp_path_factory):
     argv = ["bench", "milo", "--config", config, "--out", out, "--work", work, "--iterations", "3"]
     assert main(list(map(str, argv))) == 0
     arms = {arm: json.loads((work / arm / "report" / "metrics.json").read_text()) for arm in ("template", "plain")}
-    return tables((out / "milo.md").read_text()), arms, json.loads((out / "milo.json").read_text())
+    markdown = (out / "milo.md").read_text()
+    return tables(markdown), arms, json.loads((out / "milo.json").read_text()), markdown
 
 
 def tables(markdown: str) -> dict:
@@ -89,7 +90,7 @@ def printed(cell: str, value: float, fmt: str) -> bool:
 
 
 def test_both_tables_have_every_row(run):
-    found, _, _ = run
+    found, _, _, _ = run
     main_table = found["MILO-Net on the benchmark room, beside the paper (Table 3, section 4.1)"]
     ablation = found["Ablation (Fig. 12): MILO-Net against two plain MLPs, same room and settings"]
     assert [row["metric"] for row in main_table] == [row.label for row in ROWS]
@@ -100,7 +101,7 @@ def test_both_tables_have_every_row(run):
 
 
 def test_numbers_are_the_evaluate_runs_own(run):
-    found, arms, _ = run
+    found, arms, _, markdown = run
     fmt = {row.label: row.fmt for row in ABLATION_ROWS}
     main_table = found["MILO-Net on the benchmark room, beside the paper (Table 3, section 4.1)"]
     ablation = found["Ablation (Fig. 12): MILO-Net against two plain MLPs, same room and settings"]
@@ -118,12 +119,16 @@ def test_numbers_are_the_evaluate_runs_own(run):
             path, _ = METRICS[row["metric"]]
             assert printed(row["MILO-Net (template)"], at(arms["template"], path), fmt[row["metric"]]), row
             assert printed(row["plain MLPs (Fig. 12)"], at(arms["plain"], path), fmt[row["metric"]]), row
+    # the insertion with the noise floor's MSE taken out
+    line = re.search(r"noise taken out .*: MSE ([-0-9.e+]+), PSNR", markdown).group(1)
+    insertion = arms["template"]["insertion"]
+    assert printed(line, insertion["mean"]["mse"] - insertion["noise_floor"]["mse"], ".4g")
     # the ablation really is the other network: the two arms' maps differ
     assert arms["template"]["maps"]["map_mse"] != arms["plain"]["maps"]["map_mse"]
 
 
 def test_targets_and_shortfalls_follow_from_the_numbers(run):
-    found, arms, _ = run
+    found, arms, _, _ = run
     main_table = found["MILO-Net on the benchmark room, beside the paper (Table 3, section 4.1)"]
     judged = 0
     for row in main_table:
@@ -146,7 +151,7 @@ def test_targets_and_shortfalls_follow_from_the_numbers(run):
 
 
 def test_time_and_memory_are_the_measured_ones(run):
-    found, _, report = run
+    found, _, report, _ = run
     title = "MILO-Net on the benchmark room, beside the paper (Table 3, section 4.1)"
     main_table = {row["metric"]: row for row in found[title]}
     for name in ("template", "plain"):

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import shutil
 import sys
@@ -386,6 +387,18 @@ def table_row(row: Row, arm: dict) -> dict:
     }
 
 
+def noise_removed(metrics: dict) -> dict | None:
+    """Insertion MSE with the renders' noise taken out: E[(recovered - truth)^2] = bias^2 +
+    var_recovered + var_truth, and the noise floor (truth against truth) is 2 var_truth; with
+    var_recovered ~ var_truth (the same room, spp and tone mapping), MSE - floor MSE estimates the
+    recovery's own error. PSNR from it as evaluate takes PSNR (10 log10(1 / MSE), [0, 1] values)."""
+    insertion = metrics["insertion"]
+    if not insertion or not insertion.get("noise_floor"):
+        return None
+    mse = insertion["mean"]["mse"] - insertion["noise_floor"]["mse"]
+    return {"mse": mse, "psnr_db": 10 * math.log10(1 / mse) if mse > 0 else None}
+
+
 def ablation_table(arms: dict) -> list[dict]:
     rows = []
     for row in ABLATION_ROWS:
@@ -450,6 +463,14 @@ def write_markdown(out: Path, report: dict, config: dict, settings: Settings) ->
         "recovery scores at this spp.",
         "",
     ]
+    removed = report["insertion_noise_removed"]["template"]
+    if removed is not None:
+        psnr = "-" if removed["psnr_db"] is None else f"{removed['psnr_db']:.2f} dB"
+        text += [
+            f"Insertion with the renders' noise taken out (MSE minus the noise floor's MSE, assuming both "
+            f"renders equally noisy): MSE {removed['mse']:.4g}, PSNR {psnr}.",
+            "",
+        ]
     if "plain" in arms:
         text.append(
             format_table(
@@ -515,6 +536,7 @@ def run(
         "table": [table_row(row, arms["template"]) for row in ROWS],
         "ablation": ablation_table(arms) if ablation else [],
         "curves": curves(arms),
+        "insertion_noise_removed": {name: noise_removed(arm["metrics"]) for name, arm in arms.items()},
     }
     notes += missed_notes(results["table"])
     report = run_report("milo", settings, "not used", notes, started, load_start, device, results)
