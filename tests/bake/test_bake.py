@@ -30,7 +30,22 @@ def recovered(tmp_path):
 
 def test_bake_writes_the_scene_the_maps_describe(recovered):
     root, truth = recovered
-    assert main(["bake", "--maps", str(root / "maps.npz"), "--geometry", str(root / "geometry"), "--cameras", str(root / "cameras"), "--out", str(root / "scene")]) == 0  # noqa: E501
+    assert (
+        main(
+            [
+                "bake",
+                "--maps",
+                str(root / "maps.npz"),
+                "--geometry",
+                str(root / "geometry"),
+                "--cameras",
+                str(root / "cameras"),
+                "--out",
+                str(root / "scene"),
+            ]
+        )
+        == 0
+    )  # noqa: E501
     baked = load_scene(root / "scene")
     for name in ("kd", "ks", "ka", "ke", "kw", "kg"):
         np.testing.assert_array_equal(getattr(baked.maps, name), getattr(truth.maps, name), err_msg=name)
@@ -49,7 +64,22 @@ def test_maps_of_another_atlas_are_refused(recovered, capsys):
     root, truth = recovered
     small = Maps.uniform(size=(8, 8), cube=4)
     write_snapshot(root / "small.npz", small, iteration=1, wall_time=0.0)
-    assert main(["bake", "--maps", str(root / "small.npz"), "--geometry", str(root / "geometry"), "--cameras", str(root / "cameras"), "--out", str(root / "scene")]) == 2  # noqa: E501
+    assert (
+        main(
+            [
+                "bake",
+                "--maps",
+                str(root / "small.npz"),
+                "--geometry",
+                str(root / "geometry"),
+                "--cameras",
+                str(root / "cameras"),
+                "--out",
+                str(root / "scene"),
+            ]
+        )
+        == 2
+    )  # noqa: E501
     h, w = truth.maps.atlas_shape
     assert (
         f"small.npz: kd: expected shape ({h}, {w}, 3) (the recovered atlas), got (8, 8, 3)" in capsys.readouterr().err
