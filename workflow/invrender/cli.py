@@ -420,11 +420,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .bench import BENCHMARKS
 
-    p = stages.add_parser("bench", help="benchmarks: invrender against Mitsuba 3 in the same run")
+    p = stages.add_parser("bench", help="benchmarks (docs/benchmarks.md): against Mitsuba 3, MILO recovery")
     p.add_argument("what", choices=list(BENCHMARKS))
     p.add_argument("--quick", action="store_true", help="small sizes, to check the harness")
     p.add_argument("--out", default="docs/benchmarks", help="where the tables and plots go")
     p.add_argument("--device")
+    milo = p.add_argument_group("bench milo")
+    milo.add_argument("--config", help="the workflow config with the room (default config/benchmark.yaml)")
+    milo.add_argument("--iterations", type=int, help="overrides the preset's iterations (quick runs)")
+    milo.add_argument(
+        "--ablation",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also train the plain-MLP ablation, template: false (default: yes)",
+    )
+    milo.add_argument("--work", help="where the chain's stages write (default results/bench/milo)")
     p.set_defaults(func=cmd_bench)
     return parser
 

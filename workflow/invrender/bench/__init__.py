@@ -7,6 +7,8 @@
   Blender's own interpreter; docs/export.md, "Blender").
 - ``export``: what the USD export loses: round trip, standard view, GGX in Mitsuba 3 (``export.py``;
   docs/export.md).
+- ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
+  and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
@@ -17,16 +19,28 @@ from __future__ import annotations
 
 import importlib
 
-BENCHMARKS = ("render", "gradients", "export")  # each a module here with run(quick, out, device)
+BENCHMARKS = ("render", "gradients", "export", "milo")  # each a module here with run(quick, out, device)
+OPTIONS = {"milo": ("config", "iterations", "ablation", "work")}  # what only some of them take
 
 
 def run_benchmark(what: str, args) -> dict:
-    """Run benchmark ``what`` with the CLI's namespace (quick, out, device); returns its results."""
+    """Run benchmark ``what`` with the CLI's namespace (quick, out, device, and the options that
+    benchmark takes, OPTIONS); returns its results. An option given to a benchmark that does not
+    take it is refused."""
+    from ..scene.types import SceneError
+
     if what not in BENCHMARKS:
         raise ValueError(f"bench: expected one of {list(BENCHMARKS)}, got {what!r}")
+    given = {
+        key: getattr(args, key) for keys in OPTIONS.values() for key in keys if getattr(args, key, None) is not None
+    }
+    stray = sorted(set(given) - set(OPTIONS.get(what, ())))
+    if stray:
+        raise SceneError(f"bench {what}", ", ".join(f"--{key}" for key in stray), "options of bench milo only")
     run = importlib.import_module(f".{what}", __name__).run
     return run(
         quick=bool(getattr(args, "quick", False)),
         out=getattr(args, "out", "docs/benchmarks"),
         device=getattr(args, "device", None),
+        **given,
     )
