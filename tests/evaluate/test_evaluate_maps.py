@@ -10,7 +10,7 @@ from truths import rebaked, small_room
 
 from invrender.evaluate.balls import BALL_LIGHTS, ball_errors, ball_normals, shade_balls
 from invrender.evaluate.correspond import correspond
-from invrender.evaluate.maps import ball_subset, kg_mse, map_errors
+from invrender.evaluate.maps import ball_subset, compress, kg_mse, map_errors
 from invrender.scene.atlas import AtlasTexels
 from invrender.scene.cubemap import cube_texel_solid_angles
 from invrender.scene.types import ATLAS_MAPS, Maps, Mesh
@@ -37,7 +37,7 @@ def test_the_truth_on_another_mesh_and_atlas_scores_near_zero(truth_and_copy):
     assert same["light_maps_mse"] < 1e-5 and same["material_mse"] < 1e-5
     assert all(value < 1e-4 for value in same["map_mse"].values()), same["map_mse"]
     assert perturbed["material_mse"] > 300 * same["material_mse"] and perturbed["material_mse"] > 1e-3
-    assert perturbed["light_maps_mse"] > 1e-3
+    assert perturbed["light_maps_mse_linear"] > 1e-3 and perturbed["light_maps_mse"] > 100 * same["light_maps_mse"]
     # kd + 0.1 everywhere: MSE 0.1^2, up to the ~1e-5 of resampling between the two atlases
     assert perturbed["map_mse"]["kd"] == pytest.approx(0.01, abs=3e-4)
     assert perturbed["map_mse"]["ks"] == same["map_mse"]["ks"]
@@ -49,7 +49,13 @@ def test_a_light_perturbation_moves_the_light_maps_mse_by_its_mean(truth_and_cop
     errors = map_errors(with_maps(copy.maps, kw=kw, kg=copy.maps.kg + 0.2), truth.maps, corr)
     assert errors["map_mse"]["kw"] == pytest.approx(0.09, abs=1e-3)
     assert errors["map_mse"]["kg"] == pytest.approx(0.04, rel=1e-6)
-    assert errors["light_maps_mse"] == pytest.approx((errors["map_mse"]["ke"] + 0.09 + 0.04) / 3, abs=1e-3)
+    assert errors["light_maps_mse_linear"] == pytest.approx((errors["map_mse"]["ke"] + 0.09 + 0.04) / 3, abs=1e-3)
+    # on the compressed scale x / (1 + x): kw as it is, kg's shift of 0.2 shrunk where the sky is bright
+    kg = kg_mse(compress(copy.maps.kg + 0.2), compress(truth.maps.kg))
+    assert 0 < kg < 0.04
+    compressed = errors["light_map_mse_compressed"]
+    assert compressed["kw"] == errors["map_mse"]["kw"] and compressed["kg"] == pytest.approx(kg, rel=1e-9)
+    assert errors["light_maps_mse"] == pytest.approx((compressed["ke"] + compressed["kw"] + kg) / 3, rel=1e-9)
 
 
 def test_the_nearest_point_search_is_exact(truth_and_copy):

@@ -12,18 +12,15 @@ import json
 import logging
 from pathlib import Path
 
-import numpy as np
-
-from ..scene.atlas import AtlasTexels, dilate
+from ..scene.atlas import AtlasTexels
 from ..scene.atomic import check_output
 from ..scene.cameras import read_cameras
 from ..scene.format import write_scene
 from ..scene.mesh_io import read_mesh
 from ..scene.snapshots import load_snapshot
-from ..scene.types import ATLAS_MAPS, Maps, Scene, SceneError
+from ..scene.types import Scene, SceneError
 
 log = logging.getLogger(__name__)
-SEAM_TEXELS = 4  # covered values grown this far into the empty texels around each chart
 
 
 def run(maps_path, geometry_dir, cameras_path, out_dir, training_path=None) -> dict:
@@ -31,9 +28,10 @@ def run(maps_path, geometry_dir, cameras_path, out_dir, training_path=None) -> d
     stage's training.json, whose preset, iterations and time go into the metadata."""
     check_output(out_dir, "scene")
     geometry_dir = Path(geometry_dir)
-    mask = AtlasTexels.load(geometry_dir / "atlas.npz").mask
-    maps, iteration, wall_time = load_snapshot(maps_path, mask.shape)
-    maps = fill_uncovered(maps, mask)
+    shape = AtlasTexels.load(geometry_dir / "atlas.npz").shape
+    # as trained: milo predicts the charts and their padding, and gives every other texel a valid
+    # value (the output kernel's lower bounds), so what was rendered in training is what is baked
+    maps, iteration, wall_time = load_snapshot(maps_path, shape)
     cameras = read_cameras(cameras_path)
     if not cameras:
         raise SceneError(cameras_path, "(cameras)", "at least one posed camera")
@@ -52,15 +50,3 @@ def run(maps_path, geometry_dir, cameras_path, out_dir, training_path=None) -> d
     log.info("bake: %s (maps of iteration %d, %d cameras) -> %s", maps_path, iteration, len(cameras), out_dir)
     return metadata
 
-
-def fill_uncovered(maps: Maps, mask: np.ndarray) -> Maps:
-    """MILO-Net predicts covered texels only (the rest are 0, and ka = 0 is no valid
-    roughness). The nearest-texel lookup can read a texel just outside a chart, so the charts
-    are grown into their borders (as the truth's maps are, ``scene.atlas.bake``); texels no
-    chart reaches take the mean of the covered ones, a valid value that nothing renders."""
-    filled = {}
-    for name in ATLAS_MAPS:
-        values, grown = dilate(getattr(maps, name), mask, SEAM_TEXELS)
-        values[~grown] = values[mask].mean(axis=0)
-        filled[name] = values
-    return Maps(**filled, kg=maps.kg)

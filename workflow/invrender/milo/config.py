@@ -18,6 +18,7 @@ _COMMON = {
     "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)
+    "texture_importance": True,  # strategy 4 also samples texels by their observed brightness
     "hard_materials": True,  # render each texel's most probable material (network.hard_through)
     "warm_start_steps": 200,  # MLP 1 fitted to the photographs' brightest texels first (importance.py)
     "warm_start_fraction": 0.3,  # texels seen brighter than this fraction of the brightest start emitting

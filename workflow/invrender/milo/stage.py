@@ -123,6 +123,8 @@ def run(
         settings["loss_epsilon"] * sky,
     )
     radiance, seen = observed_radiance(atlas, renderer, train_cams, images)
+    if settings["texture_importance"]:  # section 3.5's texture importance sampling
+        renderer.importance = radiance @ LUMINANCE.astype(np.float32)
     texels = training.texels
     training.warm_start(
         texels.gather(emitting_start(radiance, seen, emission, settings["warm_start_fraction"])),

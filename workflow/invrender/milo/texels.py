@@ -55,9 +55,11 @@ class Texels:
             scale=scale,
         )
 
-    def scatter(self, values: np.ndarray, channels: int) -> np.ndarray:
-        """(H, W, channels) with `values` (n, channels) at the texels and 0 elsewhere."""
-        out = np.zeros((*self.shape, channels), np.float32)
+    def scatter(self, values: np.ndarray, channels: int, background=0.0) -> np.ndarray:
+        """(H, W, channels) with `values` (n, channels) at the texels and `background` (a value
+        per channel) elsewhere."""
+        out = np.empty((*self.shape, channels), np.float32)
+        out[...] = background
         out[self.rows, self.cols] = values
         return out
 

@@ -29,7 +29,7 @@ from ..render.batches import ray_batch
 from ..render.renderer import Renderer
 from ..scene.types import ATLAS_MAPS, Camera, Maps
 from .losses import image_loss, regularisers
-from .network import MiloNet
+from .network import LOWER, MiloNet
 from .texels import Texels, sky_directions
 
 CHUNK = 1 << 16  # texels per network call without gradients
@@ -140,7 +140,7 @@ class Training:
                 for i in range(0, len(t), CHUNK)
             ]
         ).numpy()
-        atlas = t.scatter(values, values.shape[1])
+        atlas = t.scatter(values, values.shape[1], LOWER.numpy())  # texels no UV reads: valid, dark, smooth
         maps = {
             name: atlas[..., c].squeeze(-1) if c.stop - c.start == 1 else atlas[..., c]
             for name, c in GRAD_CHANNELS.items()

@@ -42,6 +42,7 @@ class Renderer:
         w_emit: float = 0.25,
         host_scene: HostScene | None = None,
         proposal: Maps | None = None,
+        importance: np.ndarray | None = None,
     ):
         if not isinstance(features, Features):
             raise TypeError(
@@ -51,7 +52,8 @@ class Renderer:
         self.scene, self.features = scene, features
         self.w_env, self.w_emit = w_env, w_emit
         self.context, self.queue = context_and_queue(device)
-        self.host = host_scene or HostScene.pack(scene.mesh, scene.maps)
+        self.importance = importance  # HostScene.pack: texels strategy 4 samples besides the emitters
+        self.host = host_scene or HostScene.pack(scene.mesh, scene.maps, importance=importance)
         if proposal is not None:  # every sampling decision from the proposal: BSDF lobes and tables
             self.host = self.host.sampling_from(HostScene.pack(scene.mesh, proposal, bvh=self.host.bvh))
         self.proposal = None if proposal is None else self._buffer(pack_material(proposal))
@@ -67,7 +69,7 @@ class Renderer:
         and uploaded again."""
         self.scene.maps = maps
         on_device = {name: self.scene_args[SCENE_ARG_ORDER.index(name)] for name in GEOMETRY_ARGS}
-        self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh)
+        self.host = HostScene.pack(self.scene.mesh, maps, bvh=self.host.bvh, importance=self.importance)
         self.scene_args = self._scene_args(reuse=on_device)
 
     def _scene_args(self, reuse: dict | None = None) -> list:

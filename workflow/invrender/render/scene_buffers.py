@@ -140,17 +140,22 @@ def _barycentric_grid(levels: int = 8) -> np.ndarray:
 
 
 def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
-    """area x mean luminance of ke over each triangle (sampling strategy 4's weights).
+    """area x mean luminance of ke over each triangle (sampling strategy 4's weights)."""
+    return surface_power(mesh, maps.ke @ LUMINANCE)
 
-    Only triangles whose UV box holds an emitting texel are looked up (a summed-area table
+
+def surface_power(mesh: Mesh, luminance: np.ndarray) -> np.ndarray:
+    """area x mean of an (H, W) atlas map over each triangle.
+
+    Only triangles whose UV box holds a positive texel are looked up (a summed-area table
     answers that in O(1) per triangle): in a room almost none emit, and looking up all of a
     million-triangle mesh was most of the time it took to pack it."""
-    h, w = maps.atlas_shape
-    emitting = (maps.ke @ LUMINANCE) > 0
+    h, w = luminance.shape
+    positive = luminance > 0
     power = np.zeros(len(mesh.faces))
-    if not emitting.any():
+    if not positive.any():
         return power
-    table = np.pad(emitting.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
+    table = np.pad(positive.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
     uv = mesh.uvs[mesh.faces].astype(np.float64)  # (F, 3, 2)
     col = np.clip(np.floor(uv[..., 0] * w).astype(np.int64), 0, w - 1)
     row = np.clip(np.floor((1.0 - uv[..., 1]) * h).astype(np.int64), 0, h - 1)
@@ -160,8 +165,8 @@ def emitted_power(mesh: Mesh, maps: Maps) -> np.ndarray:
     v0, v1, v2 = (mesh.positions[faces[:, k]].astype(np.float64) for k in range(3))
     area = 0.5 * np.linalg.norm(np.cross(v1 - v0, v2 - v0), axis=1)
     points = np.einsum("pk,fkc->fpc", _barycentric_grid(), uv[candidates])
-    ke = atlas_lookup(maps.ke, points) @ LUMINANCE
-    power[candidates] = area * ke.mean(axis=1)
+    values = atlas_lookup(luminance, points)
+    power[candidates] = area * values.mean(axis=1)
     return np.where(np.isfinite(power), power, 0.0)
 
 
@@ -234,7 +239,13 @@ class HostScene:
     env_black: bool
 
     @classmethod
-    def pack(cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None) -> HostScene:
+    def pack(
+        cls, mesh: Mesh, maps: Maps, bvh: WideBVH | None = None, importance: np.ndarray | None = None
+    ) -> HostScene:
+        """`importance`: an (H, W) luminance map that strategy 4 samples besides the emitters
+        (MILO's texture importance sampling: the captured images' brightness projected onto the
+        atlas, so directions towards brightly lit walls are drawn as often as towards lamps). The
+        strategy's density stays exact: pdf_emitter sums every sampled triangle along a ray."""
         v0, v1, v2 = triangle_vertices(mesh.positions, mesh.faces)
         bvh = bvh or build_bvh(v0, v1, v2)
         order = bvh.tri_order
@@ -244,6 +255,8 @@ class HostScene:
         one_sided = one_sided_faces(mesh).astype(np.uint8)
 
         power = emitted_power(mesh, maps)
+        if importance is not None:
+            power = power + surface_power(mesh, np.asarray(importance, np.float64))
         emitters = np.flatnonzero(power > 0)
         em_bvh = build_bvh(v0[emitters], v1[emitters], v2[emitters]) if len(emitters) else _empty_bvh()
         em_order = emitters[em_bvh.tri_order]  # emitter-BVH slot -> original triangle
