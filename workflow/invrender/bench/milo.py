@@ -69,7 +69,10 @@ class Row:
 
 
 ROWS = (
-    Row("light maps MSE (ke, kw, kg)", ("metrics", "maps", "light_maps_mse"), ".4g", "0.002", "<=", 0.002),
+    Row("light maps MSE (ke, kw, kg; x/(1+x))", ("metrics", "maps", "light_maps_mse"), ".4g", "0.002", "<=", 0.002),
+    # evaluate reports the light maps in linear radiance too (docs/evaluate.md): the paper does not
+    # say its scale, so the table shows both and judges the compressed one.
+    Row("light maps MSE, linear radiance", ("metrics", "maps", "light_maps_mse_linear"), ".4g"),
     Row("material MSE (shading balls)", ("metrics", "maps", "material_mse"), ".4g", "0.015", "<=", 0.015),
     Row(
         "insertion PSNR [dB]",
