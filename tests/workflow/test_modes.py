@@ -88,12 +88,16 @@ def test_a_photograph_with_cameras_gets_the_cameras_rule_and_no_more(tmp_path):
         assert "(issue 13)" in result.stdout
 
 
-def test_a_multiview_capture_gets_cameras_geometry_and_gradients(tmp_path):
-    """The default mode of a capture; an OBJ mesh does as well as mesh.ply."""
+def test_a_multiview_capture_is_recovered_end_to_end(tmp_path):
+    """The default mode of a capture; an OBJ mesh does as well as mesh.ply. With no truth there
+    is no evaluate and no truth_scene: the scene directory comes from milo_train and bake."""
     lay_out(tmp_path, ["kitchen/images/v0.png", "kitchen/mesh.obj", *(f"kitchen/{name}" for name in COLMAP)])
     result = dry_run(tmp_path, {"kitchen": {"capture": {"path": "kitchen"}}}, "-p")
-    assert job_counts(result.stdout) == {"cameras": 1, "geometry": 1, "gradients": 1, "all": 1}
+    stages = ("cameras", "geometry", "gradients", "milo_train", "bake", "features", "render", "export", "all")
+    assert job_counts(result.stdout) == dict.fromkeys(stages, 1)
     assert "geometry kitchen/mesh.obj --out results/kitchen/geometry" in result.stdout
+    assert "cameras kitchen/sparse --out results/kitchen/cameras --images kitchen/images" in result.stdout
+    assert "milo --geometry results/kitchen/geometry --cameras results/kitchen/cameras" in result.stdout
 
 
 MULTIVIEW = ["images/v0.exr", *COLMAP]

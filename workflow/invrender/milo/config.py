@@ -64,7 +64,7 @@ PRESETS = {
         "layers": 4,
         "width": 128,
         "skip_layers": 2,
-        "iterations": 600,
+        "iterations": 300,
         "rays": 16384,
         "spp": 8,
         "max_bounces": 3,
