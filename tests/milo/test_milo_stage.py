@@ -194,3 +194,11 @@ def test_bad_captures_stop_before_training_naming_the_file(tiny_capture, tmp_pat
     assert run() == 2
     assert f"{model}: camera view_002.exr: expected a camera that sees the mesh" in _last_line(capsys)
     assert not (tmp_path / "out" / "weights.pt").exists()
+
+
+def test_a_fresh_run_keeps_no_snapshots_of_an_earlier_longer_one(tiny_capture, tmp_path):
+    out = tmp_path / "run"
+    assert main(milo_args(tiny_capture, out, {**TINY, "iterations": 7, "snapshot_every": 3})) == 0
+    assert sorted(p.name for p in (out / "snapshots").iterdir()) == [f"iter_00000{i}.npz" for i in (3, 6, 7)]
+    assert main(milo_args(tiny_capture, out, {**TINY, "iterations": 4, "snapshot_every": 3})) == 0
+    assert sorted(p.name for p in (out / "snapshots").iterdir()) == ["iter_000003.npz", "iter_000004.npz"]
