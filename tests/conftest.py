@@ -11,7 +11,7 @@ import pytest
 import invrender.mitsuba.llvm  # noqa: E402, F401
 
 HERE = Path(__file__).parent
-for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_", HERE / "fuzz"):
+for helper_dir in (HERE, HERE / "render", HERE / "geometry", HERE / "import_", HERE / "fuzz", HERE / "milo"):
     if str(helper_dir) not in sys.path:
         sys.path.insert(0, str(helper_dir))
 

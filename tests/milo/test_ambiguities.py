@@ -1,0 +1,113 @@
+"""The paper's ambiguity cases (MILO sections 3.3 and 4.3-4.4) on small closed rooms, trained
+with the real stage (milo.stage.run) and scored on the atlas texels of each patch.
+
+- Diffuse-emission (Fig. 3b, Fig. 12): a lamp in the ceiling over a white plate on the floor.
+  Per texel the captures cannot tell kd E / pi from ke; the template can (a white plate lit
+  unevenly is one material with one kd, not an emission gradient). The ablation of Fig. 12
+  (`template: false`, two plain MLPs) explains part of the plate's light by emission.
+- Colour bleeding (Fig. 15): a red and a green wall facing each other under one lamp; each wall
+  is lit by the other's colour, and the recovered kd must not take it.
+
+Every setting the result depends on is passed explicitly (SETTINGS), so the tests do not follow
+the presets' defaults. The rooms' walls are black, so all the light the cameras see comes from
+the patches, and the captures need only the bounces training renders (SETTINGS' max_bounces).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import torch
+from ambiguity_scenes import Patch, closed_room, pinhole_camera, ring_cameras, write_inputs
+
+from invrender.milo import stage
+from invrender.scene.snapshots import load_snapshot
+from invrender.synthesize.room import Material
+
+SETTINGS = {
+    "iterations": 150,
+    "rays": 4096,  # every pixel of the six 32 x 24 views, near enough
+    "spp": 4,
+    "max_bounces": 2,
+    "materials": 4,  # Q: one lamp, one window, two normal materials (the rooms have 3 materials)
+    "image_loss": "mse",
+    "lr_mlp": 3e-3,
+    "lr_template": 2.0,  # the losses are means (losses.py): the paper's 0.01 barely moves the template
+    "decay_at": [0.7, 0.9],
+    "seed": 0,
+    "checkpoint_every": 1000,
+    "snapshot_every": 1000,
+}
+LAMP_KE = 4.0
+WHITE_KD = 0.8
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """torch's OpenMP threads spin beside PoCL's on 2 cores: training ran 5-10x slower."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def ceiling_cameras(count=6):
+    """Six views around the room's middle, each seeing the ceiling and the floor."""
+    ring = ring_cameras((0, 0.8, 0), (0, 0.8, 0), 1.0, count)
+    return [pinhole_camera(c.name, c.center, (0, 0.7, 0), 32, 24, 110) for c in ring]
+
+
+def train(fixture, root, **overrides):
+    """(recovered maps, seconds) of the milo stage on `fixture`'s captures."""
+    paths = write_inputs(fixture, root)
+    start = time.perf_counter()
+    settings = SETTINGS | overrides
+    stage.run(paths["geometry"], paths["cameras"], paths["images"], root / "milo", "demo", settings, progress=False)
+    maps = load_snapshot(root / "milo" / "maps.npz", fixture.texels.shape)[0]
+    return maps, time.perf_counter() - start
+
+
+def plate_means(fixture, maps, name):
+    sel = fixture.part_texels(name)
+    return {key: getattr(maps, key)[sel].mean(0) for key in ("kd", "ks", "ke", "kw")}
+
+
+@pytest.fixture(scope="module")
+def lamp_over_plate():
+    return closed_room(
+        (2.4, 1.6, 2.4),
+        {
+            "lamp": Patch("+y", (0, 0), (0.6, 0.6), Material(kd=0.0, ks=0.0, ke=LAMP_KE)),
+            "white": Patch("-y", (0, 0), (1.4, 1.4), Material(kd=WHITE_KD, ks=0.0, ka=0.3)),
+        },
+        ceiling_cameras(),
+    )
+
+
+def test_diffuse_emission_ambiguity_is_resolved_by_the_template(lamp_over_plate, tmp_path):
+    maps, seconds = train(lamp_over_plate, tmp_path)
+    lamp, white = plate_means(lamp_over_plate, maps, "lamp"), plate_means(lamp_over_plate, maps, "white")
+    print(f"template: {seconds:.1f} s; lamp ke {lamp['ke']}, white kd {white['kd']} ke {white['ke']} ks {white['ks']}")
+    # The lamp is seen directly: its ke is the captured radiance (measured within 1 %).
+    np.testing.assert_allclose(lamp["ke"], LAMP_KE, rtol=0.05)
+    assert lamp["kd"].max() < 0.02
+    # The plate reflects: no emission (measured 0: a normal material has ke = kw = 0) ...
+    assert white["ke"].max() < 0.005 and white["kw"] < 0.005
+    # ... and it is brighter than the ablation's: kd measured 0.41-0.49 after 150 iterations,
+    # 0.46-0.48 after 300 (truth 0.8). The tolerance is wide because the two normal materials
+    # collapse into one shared with the black walls (see the report); it still excludes the
+    # ablation's 0.20.
+    np.testing.assert_allclose(white["kd"], WHITE_KD, atol=0.45)
+    assert white["kd"].mean() > 0.35
+
+
+def test_plain_mlps_explain_the_lit_plate_by_emission(lamp_over_plate, tmp_path):
+    """Fig. 12's ablation: the same captures, no template; the plate comes out partly emitting
+    (ke measured 0.06 after 100 iterations, 0.077 after 300) with a kd of 0.20-0.22."""
+    maps, seconds = train(lamp_over_plate, tmp_path, template=False)
+    white = plate_means(lamp_over_plate, maps, "white")
+    print(f"plain MLPs: {seconds:.1f} s; white kd {white['kd']} ke {white['ke']}")
+    assert white["ke"].mean() > 0.03
+    assert white["kd"].mean() < 0.35
