@@ -111,3 +111,51 @@ def test_plain_mlps_explain_the_lit_plate_by_emission(lamp_over_plate, tmp_path)
     print(f"plain MLPs: {seconds:.1f} s; white kd {white['kd']} ke {white['ke']}")
     assert white["ke"].mean() > 0.03
     assert white["kd"].mean() < 0.35
+
+
+# Fig. 15: a red wall facing a white one 0.8 m away, a lamp in the ceiling between them. The white
+# wall is lit red by its neighbour (its captured red/green ratio is above 1); its kd must not be.
+WALL_KD = {"red": (0.7, 0.1, 0.1), "white": (0.7, 0.7, 0.7)}
+BLEEDING = {"materials": 6, "max_bounces": 3}  # Q: lamp, window, black, red, white and one spare
+
+
+@pytest.fixture(scope="module")
+def facing_walls():
+    eyes = [(x, 0.8, z) for z in (-0.85, 0.85) for x in (-0.21, 0.0, 0.21)]
+    cameras = [pinhole_camera(f"view_{k:03d}.exr", eye, (0, 0.75, 0), 32, 24, 110) for k, eye in enumerate(eyes)]
+    return closed_room(
+        (0.8, 1.6, 2.0),
+        {
+            "lamp": Patch("+y", (0, 0), (0.6, 0.4), Material(kd=0.0, ks=0.0, ke=LAMP_KE)),
+            "red": Patch("-x", (0.8, 0), (1.2, 1.4), Material(kd=WALL_KD["red"], ks=0.0, ka=0.3)),
+            "white": Patch("+x", (0.8, 0), (1.2, 1.4), Material(kd=WALL_KD["white"], ks=0.0, ka=0.3)),
+        },
+        cameras,
+    )
+
+
+def red_over_green(fixture, maps, name):
+    kd = plate_means(fixture, maps, name)["kd"]
+    return kd[0] / kd[1], kd
+
+
+def test_facing_walls_come_out_without_colour_bleeding(facing_walls, tmp_path):
+    maps, seconds = train(facing_walls, tmp_path, **BLEEDING)
+    white, white_kd = red_over_green(facing_walls, maps, "white")
+    red, red_kd = red_over_green(facing_walls, maps, "red")
+    print(f"{seconds:.1f} s; white kd {white_kd} (r/g {white:.3f}), red kd {red_kd} (r/g {red:.3f})")
+    # Truth r/g: 1 on the white wall. Measured 1.22 after 150 iterations: the template's random
+    # starting colours are not yet gone (its kd 0.60 0.49 0.51); training that ignores the
+    # inter-reflection gives 1.49 (below).
+    assert white < 1.35
+    # The red wall stays red (truth r/g 7; measured 3.3, its green and blue 0.15 for 0.1).
+    assert red > 2.5
+
+
+def test_colour_bleeds_when_training_ignores_inter_reflection(facing_walls, tmp_path):
+    """The same captures trained with direct light only (max_bounces 1): the red light the white
+    wall receives from its neighbour can only be explained by a pink kd (r/g measured 1.49)."""
+    maps, seconds = train(facing_walls, tmp_path, **(BLEEDING | {"max_bounces": 1}))
+    white, white_kd = red_over_green(facing_walls, maps, "white")
+    print(f"direct light only: {seconds:.1f} s; white kd {white_kd} (r/g {white:.3f})")
+    assert white > 1.35
