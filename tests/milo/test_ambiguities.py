@@ -44,9 +44,10 @@ LAMP_KE = 4.0
 WHITE_KD = 0.8
 
 
-@pytest.fixture(autouse=True)
+@pytest.fixture(autouse=True, scope="module")
 def one_torch_thread():
-    """torch's OpenMP threads spin beside PoCL's on 2 cores: training ran 5-10x slower."""
+    """torch's OpenMP threads spin beside PoCL's on 2 cores: training ran 2-20 times slower
+    (module scope: set before the module's fixtures train)."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     yield
@@ -139,23 +140,30 @@ def red_over_green(fixture, maps, name):
     return kd[0] / kd[1], kd
 
 
-def test_facing_walls_come_out_without_colour_bleeding(facing_walls, tmp_path):
-    maps, seconds = train(facing_walls, tmp_path, **BLEEDING)
+@pytest.fixture(scope="module")
+def facing_walls_trained(facing_walls, tmp_path_factory):
+    """(maps, seconds): the milo stage on the facing walls, shared by both tests below."""
+    return train(facing_walls, tmp_path_factory.mktemp("bleeding"), **BLEEDING)
+
+
+def test_facing_walls_come_out_without_colour_bleeding(facing_walls, facing_walls_trained):
+    maps, seconds = facing_walls_trained
     white, white_kd = red_over_green(facing_walls, maps, "white")
     red, red_kd = red_over_green(facing_walls, maps, "red")
     print(f"{seconds:.1f} s; white kd {white_kd} (r/g {white:.3f}), red kd {red_kd} (r/g {red:.3f})")
     # Truth r/g: 1 on the white wall. Measured 1.22 after 150 iterations: the template's random
-    # starting colours are not yet gone (its kd 0.60 0.49 0.51); training that ignores the
-    # inter-reflection gives 1.49 (below).
-    assert white < 1.35
-    # The red wall stays red (truth r/g 7; measured 3.3, its green and blue 0.15 for 0.1).
+    # starting colours are not gone yet (the wall's kd 0.60 0.49 0.51, truth 0.7).
+    assert abs(white - 1.0) < 0.3
+    # The red wall stays red (truth r/g 7; measured 3.3: its green and blue 0.15 for 0.1).
     assert red > 2.5
 
 
-def test_colour_bleeds_when_training_ignores_inter_reflection(facing_walls, tmp_path):
+def test_colour_bleeds_when_training_ignores_inter_reflection(facing_walls, facing_walls_trained, tmp_path):
     """The same captures trained with direct light only (max_bounces 1): the red light the white
-    wall receives from its neighbour can only be explained by a pink kd (r/g measured 1.49)."""
+    wall receives from its neighbour can only be explained by a pinker kd (r/g measured 1.49,
+    against 1.22 with the inter-reflection modelled)."""
+    white = red_over_green(facing_walls, facing_walls_trained[0], "white")[0]
     maps, seconds = train(facing_walls, tmp_path, **(BLEEDING | {"max_bounces": 1}))
-    white, white_kd = red_over_green(facing_walls, maps, "white")
-    print(f"direct light only: {seconds:.1f} s; white kd {white_kd} (r/g {white:.3f})")
-    assert white > 1.35
+    direct, direct_kd = red_over_green(facing_walls, maps, "white")
+    print(f"direct light only: {seconds:.1f} s; white kd {direct_kd} (r/g {direct:.3f}, {white:.3f} modelled)")
+    assert direct > white + 0.1
