@@ -101,26 +101,46 @@ def test_synthesize_writes_captures(built):
 
 
 def test_truth_scene_copies_the_ground_truth(built):
-    """results/{scene}/scene is the synthetic truth, byte for byte (and the true poses of the
-    duplicates), until the stage that recovers it lands."""
+    """A duplicates scene's results/{scene}/scene is its synthetic truth, byte for byte, with the
+    true poses of its copies, until the stages that recover it land."""
     workdir, _ = built
-    result = snakemake(workdir, "--cores", "2", "results/room/scene", "results/cans/scene")
-    assert job_counts(result.stdout) == {"truth_scene": 2}
-    for scene in ("room", "cans"):
-        truth = workdir / "results" / scene / "capture" / "ground_truth"
-        copy = workdir / "results" / scene / "scene"
-        files = sorted(p.relative_to(truth / "scene") for p in (truth / "scene").rglob("*") if p.is_file())
-        assert "scene.json" in {str(f) for f in files} and len(files) > 3
-        for name in files:
-            assert (copy / name).read_bytes() == (truth / "scene" / name).read_bytes(), name
-        extra = {str(p.relative_to(copy)) for p in copy.rglob("*") if p.is_file()} - {str(f) for f in files}
-        extra.discard(".snakemake_timestamp")  # Snakemake's mark in every directory it outputs
-        assert extra == ({"poses.json"} if scene == "cans" else set())
-        assert (workdir / "results" / scene / "logs/truth_scene.log").read_text().count("->") >= len(files)
-        assert (workdir / "results" / scene / "benchmarks/truth_scene.tsv").is_file()
-    assert read_json(workdir / "results/cans/scene/poses.json") == read_json(
-        workdir / "results/cans/capture/ground_truth/poses.json"
-    )
+    result = snakemake(workdir, "--cores", "2", "results/cans/scene")
+    assert job_counts(result.stdout) == {"truth_scene": 1}
+    truth = workdir / "results" / "cans" / "capture" / "ground_truth"
+    copy = workdir / "results" / "cans" / "scene"
+    files = sorted(p.relative_to(truth / "scene") for p in (truth / "scene").rglob("*") if p.is_file())
+    assert "scene.json" in {str(f) for f in files} and len(files) > 3
+    for name in files:
+        assert (copy / name).read_bytes() == (truth / "scene" / name).read_bytes(), name
+    extra = {str(p.relative_to(copy)) for p in copy.rglob("*") if p.is_file()} - {str(f) for f in files}
+    extra.discard(".snakemake_timestamp")  # Snakemake's mark in every directory it outputs
+    assert extra == {"poses.json"}
+    assert (workdir / "results/cans/logs/truth_scene.log").read_text().count("->") >= len(files)
+    assert read_json(copy / "poses.json") == read_json(truth / "poses.json")
+
+
+def test_a_multiview_scene_is_recovered_not_copied(built):
+    """The room's scene directory comes from milo_train and bake: its maps are MILO-Net's
+    (maps.npz), not the truth's, on the geometry stage's mesh."""
+    import shutil
+
+    import numpy as np
+
+    from invrender.scene.format import load_scene
+
+    original, _ = built
+    workdir = original.parent / "recovered"  # a copy: the other tests count the jobs they run
+    shutil.copytree(original, workdir, symlinks=True)
+    result = snakemake(workdir, "--cores", "2", "results/room/scene")
+    assert "truth_scene" not in job_counts(result.stdout)
+    assert {"milo_train", "bake"} <= set(job_counts(result.stdout))
+    scene = load_scene(workdir / "results/room/scene")
+    with np.load(workdir / "results/room/milo/maps.npz") as maps:
+        np.testing.assert_array_equal(scene.maps.kd, maps["kd"])
+    truth = load_scene(workdir / "results/room/capture/ground_truth/scene")
+    assert scene.maps.kd.shape != truth.maps.kd.shape or not np.array_equal(scene.maps.kd, truth.maps.kd)
+    assert read_json(workdir / "results/room/scene/scene.json")["metadata"]["recovered_by"] == "invrender milo + bake"
+    assert len((workdir / "results/room/milo/log.csv").read_text().splitlines()) == 1 + 3
 
 
 def test_cameras_normalises_colmap_and_transforms_json(built):
@@ -184,10 +204,18 @@ def test_features_analyses_the_scene(built, test_config):
         "one_sided",
         "max_bounces",
     }
-    # The room has ceiling lights, a window and a glossy table.
-    assert document["features"]["emission"] and document["features"]["window"] and document["features"]["specular"]
+    # The recovered room: emission where its maps emit, the specular lobe where they are glossy.
+    from invrender.scene.format import load_scene
+
+    maps = load_scene(workdir / "results/room/scene").maps
+    assert document["features"]["emission"] == bool(maps.ke.max() > 0)
+    assert document["features"]["specular"] == bool(maps.ks.max() > settings_of(document)["specular_threshold"])
     settings = document["evidence"]["settings"]
     assert settings["bounce_fraction"] == 0.01 and settings["max_bounces"] == 10
+
+
+def settings_of(document):
+    return document["evidence"]["settings"]
 
 
 def test_gradients_writes_every_map(built, test_config):
@@ -249,17 +277,24 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
         assert (workdir / "results" / scene / "logs/export.log").stat().st_size > 0
         assert (workdir / "results" / scene / "benchmarks/export.tsv").is_file()
     room = Usd.Stage.Open(str(workdir / "results/room/export/scene.usda"))
-    assert len([p for p in room.Traverse() if p.HasAPI(UsdLux.MeshLightAPI)]) == 2  # the two ceiling panels
+    # the recovered room's lights: one per emitting region of its maps (after a few iterations of
+    # training, not yet the truth's two panels)
+    from invrender.scene.edits import emitter_regions
+    from invrender.scene.format import load_scene
+
+    _, regions = emitter_regions(load_scene(workdir / "results/room/scene"))
+    assert len([p for p in room.Traverse() if p.HasAPI(UsdLux.MeshLightAPI)]) == regions > 0
     cans = Usd.Stage.Open(str(workdir / "results/cans/export/scene.usda"))
     count = test_config["scenes"]["cans"]["synthetic"]["config"]["count"]
     assert len([p for p in cans.Traverse() if p.IsInstance()]) == count and len(cans.GetPrototypes()) == 1
 
 
-def test_user_capture_has_no_scene_to_render(built):
-    """A multiview capture gets cameras, geometry and gradients; its scene directory waits for
-    bake (issue 11), and asking for what reads it says so."""
+def test_user_capture_is_recovered_without_truth(built):
+    """A multiview capture of one's own goes the whole way (milo_train, bake, render, export);
+    with no truth there is nothing to evaluate, and asking for it says why."""
     workdir, config = built
-    result = snakemake(workdir, "-n", "results/mine/renders", config=config, check=False)
-    assert result.returncode != 0
-    assert "'mine' is a multiview capture of your own" in result.stdout
-    assert "bake (issue 11)" in result.stdout
+    result = snakemake(workdir, "-n", "results/mine/renders", "results/mine/export", config=config)
+    assert {"milo_train", "bake", "render", "export"} <= set(job_counts(result.stdout))
+    assert "truth_scene" not in job_counts(result.stdout)
+    result = snakemake(workdir, "-n", "results/mine/report", config=config, check=False)
+    assert result.returncode != 0 and "results/mine/report" in result.stdout

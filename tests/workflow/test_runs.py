@@ -15,17 +15,27 @@ import pytest
 import yaml
 from workflow_helpers import LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
 
-RULE_OF_OUTPUT = {
+_SHARED = {
     "capture": "synthesize",
     "cameras": "cameras",
     "geometry": "geometry",
     "gradients": "gradients",
-    "scene": "truth_scene",
     "features.json": "features",
     "renders": "render",
     "export": "export",
 }
-OUTPUTS = tuple(RULE_OF_OUTPUT)
+# Each scene's outputs and the rule that writes each: the room (multiview) is recovered, the
+# cans' scene is truth_scene's copy of the truth.
+RULE_OF_OUTPUT = {
+    "room": {
+        **_SHARED,
+        "milo/weights.pt": "milo_train",
+        "scene": "bake",
+        "report": "evaluate",
+        "edits": "edit",
+    },
+    "cans": {**_SHARED, "scene": "truth_scene"},
+}
 
 
 @pytest.fixture(scope="module")
@@ -38,10 +48,14 @@ def complete(tmp_path_factory):
         "cameras": 2,
         "geometry": 2,
         "gradients": 2,
-        "truth_scene": 2,
+        "milo_train": 1,
+        "bake": 1,
+        "truth_scene": 1,
         "features": 2,
         "render": 2,
         "export": 2,
+        "evaluate": 1,
+        "edit": 1,
         "all": 1,
     }
     return workdir
@@ -57,13 +71,21 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
     override = tmp_path / "faces.yaml"
     override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    # Downstream of geometry only gradients reads it so far (features and render read
-    # truth_scene's copy of the synthetic truth until bake lands): nothing upstream runs again.
-    assert job_counts(result.stdout) == {"geometry": 2, "gradients": 2, "all": 1}
+    # Downstream of geometry: gradients, and the room's recovery and all that reads it; the cans'
+    # scene is truth_scene's copy: nothing upstream runs again.
+    assert job_counts(result.stdout) == RERUN_AFTER_GEOMETRY
     assert "Params have changed since last execution" in result.stdout
     # The same through --config, as one would type it.
     result = snakemake(complete, "-n", "--config", "geometry={target_faces: 1000}")
-    assert job_counts(result.stdout) == {"geometry": 2, "gradients": 2, "all": 1}
+    assert job_counts(result.stdout) == RERUN_AFTER_GEOMETRY
+
+
+RERUN_AFTER_GEOMETRY = {
+    "geometry": 2,
+    "gradients": 2,
+    **dict.fromkeys(("milo_train", "bake", "features", "render", "export", "evaluate", "edit"), 1),
+    "all": 1,
+}
 
 
 def test_changing_render_spp_reruns_render_only(complete, tmp_path):
@@ -99,8 +121,8 @@ def _mtimes(workdir: Path) -> dict[str, float]:
     """Modification times of the stage outputs that exist, by path relative to workdir."""
     return {
         str(path.relative_to(workdir)): path.stat().st_mtime
-        for scene in ("room", "cans")
-        for name in OUTPUTS
+        for scene, outputs in RULE_OF_OUTPUT.items()
+        for name in outputs
         if (path := workdir / "results" / scene / name).exists()
     }
 
@@ -167,17 +189,15 @@ def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
 
     result = snakemake(tmp_path, "--workflow-profile", LOCAL_PROFILE)
     # Exactly the jobs whose outputs were missing run again, the killed one among them.
-    missing = [
-        f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS if f"results/{s}/{name}" not in before
-    ]
     expected = {}
-    for path in missing:
-        rule = RULE_OF_OUTPUT[path.rsplit("/", 1)[1]]
-        expected[rule] = expected.get(rule, 0) + 1
+    for scene, outputs in RULE_OF_OUTPUT.items():
+        for name, rule in outputs.items():
+            if f"results/{scene}/{name}" not in before:
+                expected[rule] = expected.get(rule, 0) + 1
     assert "features" in expected
     assert job_counts(result.stdout) == expected | {"all": 1}
     after = _mtimes(tmp_path)
     assert {path: after[path] for path in before} == before  # nothing finished was redone
-    assert set(after) == {f"results/{s}/{name}" for s in ("room", "cans") for name in OUTPUTS}
+    assert set(after) == {f"results/{s}/{name}" for s, outputs in RULE_OF_OUTPUT.items() for name in outputs}
     assert _leftovers(tmp_path) == []
     assert job_counts(snakemake(tmp_path, "-n").stdout) == {}

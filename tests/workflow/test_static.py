@@ -17,7 +17,7 @@ from workflow_helpers import REPO, TEST_CONFIG, job_counts, snakemake
 DEMO_CONFIG = REPO / "config" / "config.yaml"
 SCHEMA = REPO / "workflow" / "schemas" / "config.schema.yaml"
 SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
-RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients"}
+RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -57,10 +57,14 @@ def test_dry_run_of_the_demo(tmp_path):
         "cameras": 2,
         "geometry": 2,
         "gradients": 2,
-        "truth_scene": 2,
+        "milo_train": 1,
+        "bake": 1,
+        "truth_scene": 1,
         "features": 2,
         "render": 2,
         "export": 2,
+        "evaluate": 1,
+        "edit": 1,
         "all": 1,
     }
 
@@ -76,10 +80,14 @@ def test_rulegraph_picture_is_current(tmp_path):
         "cameras",
         "geometry",
         "gradients",
+        "milo_train",
+        "bake",
         "truth_scene",
         "features",
         "render",
         "export",
+        "evaluate",
+        "edit",
     }
     for rule in rules:
         assert f">{rule}</text>" in svg
@@ -157,7 +165,10 @@ BAD_CONFIGS = {
     ),
     "typo at the top": (
         {"render": {"spp": 4}, "scene": {}},
-        ["config: scene: unknown key; allowed: device, scenes, geometry, features, gradients, render, export"],
+        [
+            "config: scene: unknown key; allowed: device, scenes, geometry, features, gradients, render, "
+            "milo, evaluate, edit, export"
+        ],
     ),
     "typo in a scene": (
         {"scenes": {"room": {"synthetic": {"kind": "room", "sed": 3}}}},
@@ -313,10 +324,14 @@ def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
         "cameras",
         "geometry",
         "gradients",
+        "milo_train",
+        "bake",
         "truth_scene",
         "features",
         "render",
         "export",
+        "evaluate",
+        "edit",
     }
     for rule, line in resources.items():
         assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line

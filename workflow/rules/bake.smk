@@ -14,12 +14,12 @@ rule bake:
             category="Scene",
             labels={"scene": "{scene}", "file": "{name}.json"},
         ),
-    wildcard_constraints:
-        scene=scenes_pattern(MULTIVIEW),
     log:
         "results/{scene}/logs/bake.log",
     benchmark:
         "results/{scene}/benchmarks/bake.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern(MULTIVIEW),
     conda:
         "../../envs/render.yaml"
     threads: 1

@@ -526,7 +526,8 @@ _check_device()
 
 def recovers(scene):
     """A multiview scene is recovered by MILO-Net (milo_train, bake); a synthetic scene of
-    another mode still has its truth copied into place (truth_scene) until its stages land."""
+    another mode still has its truth copied into place (truth_scene) until its stages land.
+    """
     return mode(scene) == "multiview"
 
 
@@ -717,7 +718,11 @@ def export_options(wildcards):
     return " ".join(options)
 
 
-MILO_RUNTIME = {"demo": 30, "cpu": 300, "paper": 1440}  # minutes a job may run (a cluster's --time)
+MILO_RUNTIME = {
+    "demo": 30,
+    "cpu": 300,
+    "paper": 1440,
+}  # minutes a job may run (a cluster's --time)
 
 
 def milo_settings(wildcards):

@@ -17,12 +17,12 @@ rule evaluate:
             subcategory="{scene}",
             labels={"scene": "{scene}", "figure": "{figure}"},
         ),
-    wildcard_constraints:
-        scene=scenes_pattern([name for name in MULTIVIEW if name in SYNTHETIC]),
     log:
         "results/{scene}/logs/evaluate.log",
     benchmark:
         "results/{scene}/benchmarks/evaluate.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern([name for name in MULTIVIEW if name in SYNTHETIC]),
     conda:
         "../../envs/render.yaml"
     threads: 2

@@ -16,12 +16,12 @@ rule milo_train:
             labels={"scene": "{scene}", "file": "log.csv"},
         ),
         training="results/{scene}/milo/training.json",
-    wildcard_constraints:
-        scene=scenes_pattern(MULTIVIEW),
     log:
         "results/{scene}/logs/milo_train.log",
     benchmark:
         "results/{scene}/benchmarks/milo_train.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern(MULTIVIEW),
     conda:
         "../../envs/render.yaml"
     threads: 2

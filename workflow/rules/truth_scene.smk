@@ -17,12 +17,12 @@ rule truth_scene:
             category="Scene",
             labels={"scene": "{scene}", "file": "{name}.json"},
         ),
-    wildcard_constraints:
-        scene=scenes_pattern([name for name in SCENES if name not in MULTIVIEW]),
     log:
         "results/{scene}/logs/truth_scene.log",
     benchmark:
         "results/{scene}/benchmarks/truth_scene.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern([name for name in SCENES if name not in MULTIVIEW]),
     conda:
         "../../envs/workflow.yaml"
     threads: 1

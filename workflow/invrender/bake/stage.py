@@ -49,4 +49,3 @@ def run(maps_path, geometry_dir, cameras_path, out_dir, training_path=None) -> d
     write_scene(out_dir, Scene(read_mesh(geometry_dir / "mesh.ply"), maps, cameras), metadata)
     log.info("bake: %s (maps of iteration %d, %d cameras) -> %s", maps_path, iteration, len(cameras), out_dir)
     return metadata
-
