@@ -138,15 +138,7 @@ def test_a_panorama_of_a_sky_unwraps_into_the_renders_of_the_sky_from_the_face_c
         np.array([[0, 1, 2]], np.int32),
         np.zeros((3, 2), np.float32),
     )
-    features = Features(
-        specular=False,
-        emission=False,
-        emitter_sampling=False,
-        environment=True,
-        window=False,
-        env_sampling=False,
-        max_bounces=0,
-    )
+    features = Features.only(max_bounces=0, environment=True)
     renderer = Renderer(Scene(far_triangle, maps, cameras), features)
     for camera in cameras:
         rendered = renderer.render(camera, spp=16, seed=0)["radiance"]

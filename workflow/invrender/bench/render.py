@@ -530,15 +530,7 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
 
     # One bounce: camera ray + one scattered ray per sample (2 closest-hit traversals).
     pixels = camera.width * camera.height
-    bare = Features(
-        specular=False,
-        emission=True,
-        emitter_sampling=False,
-        environment=True,
-        window=True,
-        env_sampling=False,
-        max_bounces=1,
-    )
+    bare = Features.only(max_bounces=1, emission=True, environment=True, window=True)
     for key, features in (("bare", bare), ("all", Features.everything(max_bounces=1))):
         runner = InvrenderRunner(scene, camera, features, device, host=host)
         runner.warm_up()
@@ -750,15 +742,7 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
     )
 
     # One bounce (B = 1) ray throughput on the room as it is.
-    bare = Features(
-        specular=False,
-        emission=True,
-        emitter_sampling=False,
-        environment=True,
-        window=True,
-        env_sampling=False,
-        max_bounces=1,
-    )
+    bare = Features.only(max_bounces=1, emission=True, environment=True, window=True)
     one = [InvrenderRunner(scene, camera, f, device, host=host) for f in (bare, replace(analysed, max_bounces=1))]
     for r in one:
         r.warm_up()

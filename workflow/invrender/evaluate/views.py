@@ -53,15 +53,7 @@ DEFAULT_RADIUS_FRACTION = 0.04
 RADIUS_OF_DEPTH = 0.1
 SPHERE_SEGMENTS = 32
 # Primary hits are all the placement needs: no effect compiled in, no scene analysis run.
-HITS_ONLY = Features(
-    specular=False,
-    emission=False,
-    emitter_sampling=False,
-    environment=False,
-    window=False,
-    env_sampling=False,
-    max_bounces=0,
-)
+HITS_ONLY = Features.only(max_bounces=0)
 
 
 def pixel_ray(camera: Camera, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:

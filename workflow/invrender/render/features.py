@@ -39,6 +39,12 @@ class Features:
     def everything(cls, max_bounces: int = 10) -> Features:
         return cls(one_sided=True, max_bounces=max_bounces)
 
+    @classmethod
+    def only(cls, max_bounces: int = 0, **effects: bool) -> Features:
+        """Every effect off but those named: a probe that needs primary hits, or a bare path."""
+        off = {f.name: False for f in fields(cls) if f.type in (bool, "bool")}
+        return cls(**(off | effects), max_bounces=max_bounces)
+
     def defines(self) -> tuple[str, ...]:
         flags = [
             f"-D FEATURE_{f.name.upper()}" for f in fields(self) if f.type in (bool, "bool") and getattr(self, f.name)
