@@ -12,11 +12,13 @@ import sys
 import pytest
 import tomllib
 import yaml
-from workflow_helpers import REPO, TEST_CONFIG, job_counts, snakemake
+from workflow_helpers import FULL_RUN_JOBS, REPO, TEST_CONFIG, job_counts, snakemake
 
 DEMO_CONFIG = REPO / "config" / "config.yaml"
 SCHEMA = REPO / "workflow" / "schemas" / "config.schema.yaml"
 SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
+RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "truth_scene"}
+RULES |= {"features", "render", "export", "evaluate", "edit"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit"}
 
 
@@ -52,21 +54,7 @@ def test_python_follows_ruff(command):
 
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
-    assert job_counts(result.stdout) == {
-        "synthesize": 2,
-        "cameras": 2,
-        "geometry": 2,
-        "gradients": 2,
-        "milo_train": 1,
-        "bake": 1,
-        "truth_scene": 1,
-        "features": 2,
-        "render": 2,
-        "export": 2,
-        "evaluate": 1,
-        "edit": 1,
-        "all": 1,
-    }
+    assert job_counts(result.stdout) == FULL_RUN_JOBS
 
 
 def test_rulegraph_picture_is_current(tmp_path):
@@ -74,21 +62,7 @@ def test_rulegraph_picture_is_current(tmp_path):
     result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
     rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
     svg = (REPO / "docs" / "rulegraph.svg").read_text()
-    assert rules == {
-        "all",
-        "synthesize",
-        "cameras",
-        "geometry",
-        "gradients",
-        "milo_train",
-        "bake",
-        "truth_scene",
-        "features",
-        "render",
-        "export",
-        "evaluate",
-        "edit",
-    }
+    assert rules == {"all"} | RULES
     for rule in rules:
         assert f">{rule}</text>" in svg
 
@@ -319,20 +293,7 @@ def test_slurm_profile_requests_gpus_for_ray_tracing(tmp_path, device, gpus):
     result = snakemake(tmp_path, *args)
     resources = _resources_by_rule(result.stdout)
     resources.pop("all", None)
-    assert set(resources) == {
-        "synthesize",
-        "cameras",
-        "geometry",
-        "gradients",
-        "milo_train",
-        "bake",
-        "truth_scene",
-        "features",
-        "render",
-        "export",
-        "evaluate",
-        "edit",
-    }
+    assert set(resources) == RULES
     for rule, line in resources.items():
         assert "mem_mb=" in line and "runtime=" in line and "cpus_per_task=" in line
         if rule in RAY_TRACING_RULES:

@@ -79,3 +79,22 @@ def colmap_image_names(model_dir) -> list[str]:
 
     reconstruction = pycolmap.Reconstruction(str(model_dir))
     return sorted(image.name for image in reconstruction.images.values())
+
+
+# The jobs of a complete run of the test config (and of the demo): the room (multiview) is
+# recovered, evaluated and edited; the cans keep truth_scene's copy of their truth.
+FULL_RUN_JOBS = {
+    "synthesize": 2,
+    "cameras": 2,
+    "geometry": 2,
+    "gradients": 2,
+    "milo_train": 1,
+    "bake": 1,
+    "truth_scene": 1,
+    "features": 2,
+    "render": 2,
+    "export": 2,
+    "evaluate": 1,
+    "edit": 1,
+    "all": 1,
+}
