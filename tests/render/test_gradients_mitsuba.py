@@ -94,15 +94,7 @@ def room():
     scene, tiles = textured_box_room()
     camera = scene.cameras[0]
     weights = np.random.default_rng(2).uniform(0.5, 1.5, (camera.height, camera.width, 3)).astype(np.float32)
-    features = Features(
-        specular=False,
-        emission=True,
-        emitter_sampling=True,
-        environment=False,
-        window=False,
-        env_sampling=False,
-        max_bounces=BOUNCES,
-    )
+    features = Features.only(max_bounces=BOUNCES, emission=True, emitter_sampling=True)
     return scene, tiles, camera, weights, Renderer(scene, features)
 
 

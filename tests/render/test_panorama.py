@@ -22,15 +22,7 @@ def test_cube_face_cameras_see_the_sky_texel_of_every_pixel_direction():
     center = np.array([0.3, -0.2, 0.1])
     cameras = cube_face_cameras(center, size=32)
     scene = Scene(far_triangle, maps, cameras)
-    features = Features(
-        specular=False,
-        emission=False,
-        emitter_sampling=False,
-        environment=True,
-        window=False,
-        env_sampling=False,
-        max_bounces=0,
-    )
+    features = Features.only(max_bounces=0, environment=True)
     renderer = Renderer(scene, features)
     for camera in cameras:
         assert np.isclose(np.linalg.det(camera.R), 1.0)

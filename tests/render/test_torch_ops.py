@@ -13,15 +13,7 @@ from invrender.render.features import Features
 from invrender.render.renderer import Renderer
 from invrender.render.torch_ops import MAP_ORDER, render_rays
 
-FEATURES = Features(
-    specular=False,
-    emission=True,
-    emitter_sampling=True,
-    environment=False,
-    window=False,
-    env_sampling=False,
-    max_bounces=3,
-)
+FEATURES = Features.only(max_bounces=3, emission=True, emitter_sampling=True)
 
 
 def scene_with_two_views():

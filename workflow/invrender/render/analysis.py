@@ -71,15 +71,7 @@ def rays_can_escape(scene, bounces: int = 3, spp: int = 4, device: str | None = 
     from .renderer import Renderer  # the escape probe renders; renderer imports features only
 
     probe = Scene(scene.mesh, Maps.uniform(size=(1, 1), kd=1.0, ks=0.0, kg=1.0, cube=1), scene.cameras)
-    features = Features(
-        specular=False,
-        emission=False,
-        emitter_sampling=False,
-        environment=True,
-        window=False,
-        env_sampling=False,
-        max_bounces=bounces,
-    )
+    features = Features.only(max_bounces=bounces, environment=True)
     renderer = Renderer(probe, features, device=device)
     return any(renderer.render(preview_camera(c), spp=spp, aovs=False)["radiance"].max() > 0 for c in scene.cameras)
 
