@@ -3,7 +3,7 @@
 MILO samples normal materials' texels by this brightness in its texture importance sampling; here
 it also starts the material assignment. "For the conservation of energy, the brightest area
 should belong to the light-emitting object" (section 3.3): texels observed far brighter than any
-lit wall can be start as emitters, and training revises the guess. Without it the network starts
+lit wall start as emitters, and training revises the guess. Without it the network starts
 from a room with no light in it, every texel is pushed towards emitting at once, and the emitting
 material settles as a dim glow over everything (measured in docs/milo.md).
 """
@@ -38,8 +38,8 @@ def observed_radiance(atlas: AtlasTexels, renderer: Renderer, cameras: list[Came
         x = np.floor(pixels[inside, 0]).astype(int)
         y = np.floor(pixels[inside, 1]).astype(int)
         z = (points[inside] @ np.asarray(camera.R).T + camera.t)[:, 2]
-        seen = np.flatnonzero(inside)[z <= depth[y, x] * (1 + DEPTH_TOLERANCE) + 1e-4]
-        keep = z <= depth[y, x] * (1 + DEPTH_TOLERANCE) + 1e-4
+        keep = z <= depth[y, x] * (1 + DEPTH_TOLERANCE) + 1e-4  # not behind what the camera sees
+        seen = np.flatnonzero(inside)[keep]
         total[seen] += image[y[keep], x[keep]]
         count[seen] += 1
     radiance = np.zeros((h, w, 3), np.float32)
