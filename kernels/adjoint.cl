@@ -4,8 +4,11 @@
  * samples. Each sample's path is traced exactly as the forward kernel traces it (same random
  * numbers) and recorded whole (at most MAX_BOUNCES + 2 vertices), then walked backwards:
  * R, the radiance leaving the vertex after the current one, gives the derivative through the
- * current vertex's BSDF, dL/dtheta = beta * (d f cos / d theta) / p * R. Sampling is detached
- * (MILO sec. 3.2): p is a constant, which keeps the gradient unbiased for the expected image.
+ * current vertex's BSDF, dL/dtheta = beta * (d f cos / d theta) / p * R, and with next-event
+ * estimation the light sample's f E w / p_l likewise. Sampling is detached (MILO sec. 3.2): p,
+ * and the MIS weights w (as Mitsuba's prb holds them), are constants; the weights of the two
+ * samples that can find the same light still sum to 1, so the gradient stays unbiased for the
+ * expected image.
  *
  * Two accumulation modes, chosen at compile time:
  * - default, deterministic: 64-bit fixed-point integers (value x scale, rounded) added with
@@ -75,47 +78,74 @@ inline void add_grad3(global grad_t* target, float3 value, Accumulator* acc, int
     add_grad(target + 2, value.z, acc, map);
 }
 
+/* Adds the derivatives of weight x E, the radiance that texel `texel` (-1: the sky) sends along
+ * d, to its ke, kw and kg, and returns E. */
+inline float3 backpropagate_emission(const SceneData* s, int texel, float3 d, float3 weight, global grad_t* grad_atlas,
+                                     global grad_t* grad_kg, Accumulator* acc)
+{
+    if (texel < 0) {
+#ifdef FEATURE_ENVIRONMENT
+        add_grad3(grad_kg + 3 * cube_texel_of(s, d), weight, acc, MAP_KG);
+        return environment(s, d);
+#else
+        return (float3)(0.0f);
+#endif
+    }
+    Material m = material_at(s, texel);
+#ifdef FEATURE_EMISSION
+    add_grad3(grad_atlas + GRAD_CHANNELS * texel + GRAD_KE, weight, acc, MAP_KE);
+#endif
+#ifdef FEATURE_WINDOW
+    add_grad(grad_atlas + GRAD_CHANNELS * texel + GRAD_KW, dot(weight, environment(s, d)), acc, MAP_KW);
+    add_grad3(grad_kg + 3 * cube_texel_of(s, d), weight * m.kw, acc, MAP_KG);
+#endif
+    return emitted(s, &m, d);
+}
+
+/* Adds through x d(f cos)/d(kd, ks, ka) for the direction wi to the texel's gradients g. */
+inline void backpropagate_bsdf(const Material* m, float3 n, float3 wo, float3 wi, float3 through, global grad_t* g,
+                               Accumulator* acc)
+{
+    float3 d_kd, d_ks, d_ka;
+    bsdf_cos_gradients(m, n, wo, wi, &d_kd, &d_ks, &d_ka);
+    add_grad3(g + GRAD_KD, through * d_kd, acc, MAP_KD);
+#ifdef FEATURE_SPECULAR
+    add_grad3(g + GRAD_KS, through * d_ks, acc, MAP_KS);
+    add_grad(g + GRAD_KA, dot(through, d_ka), acc, MAP_KA);
+#endif
+}
+
+/* R is the radiance leaving the vertex after the current one towards it; L, what leaves the
+ * current one: its weighted E, its light sample's f E weight, and f R / p through its BSDF sample. */
 inline void backpropagate_path(const SceneData* s, const PathVertex* path, int length, float3 adjoint,
                                global grad_t* grad_atlas, global grad_t* grad_kg, Accumulator* acc)
 {
-    float3 R = (float3)(0.0f); /* radiance leaving the vertex after the current one */
+    float3 R = (float3)(0.0f);
     for (int b = length - 1; b >= 0; --b) {
         PathVertex v = path[b];
         float3 weight = adjoint * v.beta;
         if (v.texel < 0) {
-#ifdef FEATURE_ENVIRONMENT
-            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight, acc, MAP_KG);
-            R = environment(s, v.d);
-#endif
+            R = v.mis * backpropagate_emission(s, -1, v.d, weight * v.mis, grad_atlas, grad_kg, acc);
             continue;
         }
         Material m = material_at(s, v.texel);
         global grad_t* g = grad_atlas + GRAD_CHANNELS * v.texel;
-        float3 E = (float3)(0.0f); /* nothing, and no derivative, from the back of a one-sided face */
-        if (v.emits) {
-#ifdef FEATURE_EMISSION
-            add_grad3(g + GRAD_KE, weight, acc, MAP_KE);
-#endif
-#ifdef FEATURE_WINDOW
-            float3 sky = environment(s, v.d);
-            add_grad(g + GRAD_KW, dot(weight, sky), acc, MAP_KW);
-            add_grad3(grad_kg + 3 * cube_texel_of(s, v.d), weight * m.kw, acc, MAP_KG);
-#endif
-            E = emitted(s, &m, v.d);
+        float3 wo = -v.d, L = (float3)(0.0f); /* nothing, and no derivative, from the back of a one-sided face */
+        if (v.emits)
+            L = v.mis * backpropagate_emission(s, v.texel, v.d, weight * v.mis, grad_atlas, grad_kg, acc);
+#ifdef NEE_ACTIVE
+        if (v.light.weight > 0.0f) {
+            float3 f = bsdf_cos(&m, v.n, wo, v.light.d);
+            backpropagate_bsdf(&m, v.n, wo, v.light.d, weight * v.light.E * v.light.weight, g, acc);
+            backpropagate_emission(s, v.light.texel, v.light.d, weight * f * v.light.weight, grad_atlas, grad_kg, acc);
+            L += f * v.light.E * v.light.weight;
         }
+#endif
         if (v.inv_pdf > 0.0f) {
-            float3 wo = -v.d, d_kd, d_ks, d_ka;
-            float3 through = weight * R * v.inv_pdf;
-            bsdf_cos_gradients(&m, v.n, wo, v.wi, &d_kd, &d_ks, &d_ka);
-            add_grad3(g + GRAD_KD, through * d_kd, acc, MAP_KD);
-#ifdef FEATURE_SPECULAR
-            add_grad3(g + GRAD_KS, through * d_ks, acc, MAP_KS);
-            add_grad(g + GRAD_KA, dot(through, d_ka), acc, MAP_KA);
-#endif
-            R = E + bsdf_cos(&m, v.n, wo, v.wi) * v.inv_pdf * R;
-        } else {
-            R = E;
+            backpropagate_bsdf(&m, v.n, wo, v.wi, weight * R * v.inv_pdf, g, acc);
+            L += bsdf_cos(&m, v.n, wo, v.wi) * v.inv_pdf * R;
         }
+        R = L;
     }
 }
 

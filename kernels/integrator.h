@@ -1,7 +1,11 @@
 #line 2 "integrator.h"
-/* The path tracer of MILO Eq. 4: L = sum_b beta_b E(x_b), beta_{b+1} = beta_b f cos / p_mix.
- * No next-event estimation and no Russian roulette: one ray per bounce and a fixed path length,
- * which keeps the adjoint (gradients) a replay of the same loop. */
+/* The path tracer. Two estimators, chosen at compile time:
+ * - next-event estimation with MIS (FEATURE_NEE, nee.h): at each vertex a light sample and a
+ *   BSDF sample, L = sum_b beta_b (w_b E(x_b) + f(wl) E_l w_l / p_l), beta_{b+1} = beta_b f / p_bsdf;
+ * - MILO's one-sample mixture (Eq. 4): L = sum_b beta_b E(x_b), beta_{b+1} = beta_b f cos / p_mix,
+ *   one ray per bounce.
+ * No Russian roulette: a fixed path length, and the adjoint (adjoint.cl) walks the recorded path
+ * back. */
 #ifndef INVRENDER_INTEGRATOR_H
 #define INVRENDER_INTEGRATOR_H
 
@@ -15,30 +19,8 @@
 #include "bsdf.h"
 #include "lights.h"
 #include "sampling.h"
-
-typedef struct {
-    float3 p;   /* on the triangle, from barycentrics (more precise than o + t d) */
-    float3 n;   /* unit geometric normal, turned to face the incoming ray: two-sided surfaces */
-    float2 uv;
-    int texel;
-    int emits;  /* 0 on the back of a one-sided face, which emits nothing (lights.h) */
-} SurfacePoint;
-
-inline SurfacePoint surface_point(const SceneData* s, const Hit* h, float3 d)
-{
-    float3 v0 = tri_vertex(s->tri_v, h->slot, 0), v1 = tri_vertex(s->tri_v, h->slot, 1),
-           v2 = tri_vertex(s->tri_v, h->slot, 2);
-    float b0 = 1.0f - h->b1 - h->b2;
-    SurfacePoint sp;
-    sp.p = b0 * v0 + h->b1 * v1 + h->b2 * v2;
-    float3 n = normalize(cross(v1 - v0, v2 - v0));
-    sp.n = dot(n, d) > 0.0f ? -n : n;
-    sp.emits = emits_towards(s->tri_one_sided, h->slot, n, d);
-    global const float2* uv = s->tri_uv + 3 * h->slot;
-    sp.uv = b0 * uv[0] + h->b1 * uv[1] + h->b2 * uv[2];
-    sp.texel = atlas_texel(s, sp.uv);
-    return sp;
-}
+#include "surface.h"
+#include "nee.h"
 
 /* The camera ray of sample k of request q = (camera, x, y, ray id): jittered in its pixel with
  * block 1 of bounce 0, so every kernel that traces this sample traces the same ray. */
@@ -57,10 +39,26 @@ typedef struct {
     float3 d;        /* direction the ray travelled to reach it */
     float3 n, wi;    /* shading normal (facing -d) and the direction sampled from here */
     int emits;       /* E counts here: not the back of a one-sided face */
-    float inv_pdf;   /* 1 / p_mix(wi); 0 when the path ended here */
+    float inv_pdf;   /* 1 / p(wi), the BSDF sample's density (the mixture's without NEE); 0: the path ended */
+    float mis;       /* weight of the E (or kg) found here against the light sample that could find it */
+#ifdef NEE_ACTIVE
+    LightSample light; /* the light sample taken here; weight 0: none */
+#endif
 } PathVertex;
 
 #define PATH_CAPACITY (MAX_BOUNCES + 2)
+
+inline void start_vertex(PathVertex* v, float3 beta, float3 d)
+{
+    v->texel = -1;
+    v->beta = beta;
+    v->d = d;
+    v->inv_pdf = 0.0f;
+    v->mis = 1.0f;
+#ifdef NEE_ACTIVE
+    v->light.weight = 0.0f;
+#endif
+}
 
 /* *suspect is set when a path ends on a density or weight that is not a positive finite number
  * for a direction its strategy did draw: never on a correct scene, so the host counts it.
@@ -70,25 +68,34 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
 {
     float3 radiance = (float3)(0.0f), beta = (float3)(1.0f);
     int skip = -1, for_derivative = 0;
+#ifdef NEE_ACTIVE
+    LightChoice lights = light_choice(s);
+    float bsdf_pdf = 0.0f; /* of the BSDF sample that led here; 0: nothing to weigh against */
+#endif
     if (path)
         *length = 0;
     for (int bounce = 0;; ++bounce) {
         Ray ray = make_ray(o, d);
         Hit hit = bvh_closest_hit(s, &ray, RAY_TMAX, skip);
         PathVertex* vertex = path ? path + (*length)++ : 0;
-        if (vertex) {
-            vertex->texel = -1;
-            vertex->beta = beta;
-            vertex->d = d;
-            vertex->inv_pdf = 0.0f;
-        }
+        if (vertex)
+            start_vertex(vertex, beta, d);
+        SurfacePoint sp;
+        if (hit.slot >= 0)
+            sp = surface_point(s, &hit, d);
+        float mis = 1.0f;
+#ifdef NEE_ACTIVE
+        if (bsdf_pdf > 0.0f && (hit.slot < 0 || sp.emits))
+            mis = mis_power(bsdf_pdf, light_pdf(s, &lights, d, &hit, &sp));
+        if (vertex)
+            vertex->mis = mis;
+#endif
         if (hit.slot < 0) {
 #ifdef FEATURE_ENVIRONMENT
-            radiance += beta * environment(s, d);
+            radiance += beta * mis * environment(s, d);
 #endif
             break;
         }
-        SurfacePoint sp = surface_point(s, &hit, d);
         Material m = material_at(s, sp.texel);
         if (vertex) {
             vertex->texel = sp.texel;
@@ -96,11 +103,15 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
             vertex->emits = sp.emits;
         }
         if (sp.emits)
-            radiance += beta * emitted(s, &m, d);
+            radiance += beta * mis * emitted(s, &m, d);
         if (bounce == MAX_BOUNCES)
             break;
         Material q = proposal_at(s, sp.texel, &m);
-        MixtureWeights w = mixture_weights(s, &q);
+#ifdef NEE_ACTIVE
+        MixtureWeights w = mixture_weights(0.0f, 0.0f, &q); /* the lights have their own sample */
+#else
+        MixtureWeights w = mixture_weights(s->w_env, s->w_emit, &q);
+#endif
         if (!reflects(&w)) {
             /* A black texel (kd = ks = 0) ends the path, but d(f cos)/d kd there is cos / pi,
              * not 0: a recorded path (the adjoint) goes on from the first one with kd's lobe in
@@ -111,11 +122,20 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
             for_derivative = 1;
         }
         float3 wo = -d;
+        float3 x = offset_ray_origin(sp.p, sp.n);
+#ifdef NEE_ACTIVE
+        if (has_lights(&lights)) {
+            float4 ul = rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_LIGHT);
+            LightSample light = sample_light(s, &lights, &w, &q, x, sp.n, wo, hit.slot, ul, suspect);
+            radiance += beta * bsdf_cos(&m, sp.n, wo, light.d) * light.E * light.weight;
+            if (vertex)
+                vertex->light = light;
+        }
+#endif
         float4 u = rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_SCATTER);
         float3 wi = sample_mixture(s, &w, &q, sp.p, sp.n, wo, u);
         if (!(dot(wi, sp.n) > 0.0f))
             break; /* spent sample, or below the surface where f = 0 */
-        float3 x = offset_ray_origin(sp.p, sp.n);
         float pdf = pdf_mixture(s, &w, &q, x, sp.n, wo, wi);
         float3 f = bsdf_cos(&m, sp.n, wo, wi);
         if (!(pdf > 0.0f) || !isfinite(pdf)) {
@@ -133,6 +153,9 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         }
         if (!(max3(beta) > 0.0f) && !for_derivative)
             break;
+#ifdef NEE_ACTIVE
+        bsdf_pdf = has_lights(&lights) ? pdf : 0.0f;
+#endif
         o = x;
         d = wi;
         skip = hit.slot;

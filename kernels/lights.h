@@ -84,19 +84,32 @@ inline float pdf_environment(const SceneData* s, float3 d)
 
 #ifdef FEATURE_EMITTER_SAMPLING
 /* Strategy 4: an emitting triangle by P(t) ~ area x mean luminance of ke, then a point uniform on
- * it (b0 = 1 - sqrt(u2), b1 = u3 sqrt(u2)). Returns the unit direction from x, or (0, 0, 0), a
+ * it (b0 = 1 - sqrt(u2), b1 = u3 sqrt(u2)). Returns the point and sets *t to the triangle (its
+ * emitter-BVH slot). */
+inline float3 sample_emitter_point(const SceneData* s, float u1, float u2, float u3, int* t)
+{
+    *t = sample_cdf(s->em_cdf, s->num_emitters, u1);
+    float su = sqrt(u2);
+    float b0 = 1.0f - su, b1 = u3 * su;
+    float3 v0 = tri_vertex(s->em_v, *t, 0), v1 = tri_vertex(s->em_v, *t, 1), v2 = tri_vertex(s->em_v, *t, 2);
+    return b0 * v0 + b1 * v1 + (1.0f - b0 - b1) * v2;
+}
+
+/* Whether emitting triangle t sends light from its point y towards x (see emits_towards). */
+inline int emitter_faces(const SceneData* s, int t, float3 y, float3 x)
+{
+    float3 v0 = tri_vertex(s->em_v, t, 0), v1 = tri_vertex(s->em_v, t, 1), v2 = tri_vertex(s->em_v, t, 2);
+    return emits_towards(s->em_one_sided, t, cross(v1 - v0, v2 - v0), y - x);
+}
+
+/* Strategy 4 as a direction from x: the unit direction to the sampled point, or (0, 0, 0), a
  * spent sample, for a point on a one-sided triangle that x sees from behind: it sends nothing
  * towards x, and pdf_emitter leaves such crossings out, so the density stays the sampler's. */
 inline float3 sample_emitter(const SceneData* s, float3 x, float u1, float u2, float u3)
 {
-    int t = sample_cdf(s->em_cdf, s->num_emitters, u1);
-    float su = sqrt(u2);
-    float b0 = 1.0f - su, b1 = u3 * su;
-    float3 v0 = tri_vertex(s->em_v, t, 0), v1 = tri_vertex(s->em_v, t, 1), v2 = tri_vertex(s->em_v, t, 2);
-    float3 y = b0 * v0 + b1 * v1 + (1.0f - b0 - b1) * v2;
-    if (!emits_towards(s->em_one_sided, t, cross(v1 - v0, v2 - v0), y - x))
-        return (float3)(0.0f);
-    return normalize(y - x);
+    int t;
+    float3 y = sample_emitter_point(s, u1, u2, u3, &t);
+    return emitter_faces(s, t, y, x) ? normalize(y - x) : (float3)(0.0f);
 }
 
 /* Solid-angle density of strategy 4 at direction d from x: every emitting triangle the ray

@@ -49,7 +49,7 @@ kernel void probe_mixture(SCENE_PARAMS, global const int* texel, global const fl
     int i = get_global_id(0);
     SCENE_INIT(s);
     Material m = material_at(&s, texel[i]);
-    MixtureWeights w = mixture_weights(&s, &m);
+    MixtureWeights w = mixture_weights(s.w_env, s.w_emit, &m);
     float3 p = x[i].xyz, nn = n[i].xyz, o = wo[i].xyz;
     float3 wi = sample_mixture(&s, &w, &m, p, nn, o, u[i]);
     wi_out[i] = (float4)(wi, pdf_mixture(&s, &w, &m, p, nn, o, wi));
@@ -75,7 +75,7 @@ kernel void probe_mixture_pdf(SCENE_PARAMS, global const int* texel, global cons
     int i = get_global_id(0);
     SCENE_INIT(s);
     Material m = material_at(&s, texel[i]);
-    MixtureWeights w = mixture_weights(&s, &m);
+    MixtureWeights w = mixture_weights(s.w_env, s.w_emit, &m);
     pdf_out[i] = pdf_mixture(&s, &w, &m, x[i].xyz, n[i].xyz, wo[i].xyz, wi[i].xyz);
 }
 

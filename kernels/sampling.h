@@ -14,17 +14,19 @@ typedef struct {
     float diffuse, specular, env, emit;
 } MixtureWeights;
 
-/* The BSDF share (1 - w_env - w_emit) is split by the lobes' luminance (F at normal incidence is
+/* w_env, w_emit: the light strategies' weights (s->w_env, s->w_emit in MILO's mixture; 0 and 0
+ * for the BSDF sampling of next-event estimation, nee.h, which samples the lights on its own).
+ * The BSDF share (1 - w_env - w_emit) is split by the lobes' luminance (F at normal incidence is
  * ks): all three Rec. 709 weights are positive, so a lobe with any reflectance is sampled with
  * some probability and no unbiasedness is lost. */
-inline MixtureWeights mixture_weights(const SceneData* s, const Material* m)
+inline MixtureWeights mixture_weights(float w_env, float w_emit, const Material* m)
 {
     MixtureWeights w = {0.0f, 0.0f, 0.0f, 0.0f};
 #ifdef FEATURE_ENV_SAMPLING
-    w.env = s->w_env;
+    w.env = w_env;
 #endif
 #ifdef FEATURE_EMITTER_SAMPLING
-    w.emit = s->w_emit;
+    w.emit = w_emit;
 #endif
     float d = luminance(m->kd), sp = 0.0f;
 #ifdef FEATURE_SPECULAR

@@ -31,6 +31,8 @@
     BUFFER(float8, em_bounds) NEXT    /* the emitter BVH, laid out as bvh_bounds */             \
     BUFFER(int8, em_children) NEXT    /* and as bvh_children */                                 \
     BUFFER(uchar, em_one_sided) NEXT  /* per emitting triangle, as tri_one_sided */             \
+    BUFFER(int, em_slot) NEXT         /* per emitting triangle: its slot in tri_v */            \
+    BUFFER(float, tri_light_pdf) NEXT /* per slot of tri_v: P(t) / area(t), or 0 */             \
     VALUE(float, w_env) NEXT          /* mixture weight of strategy 3 */                        \
     VALUE(float, w_emit)              /* mixture weight of strategy 4 */
 

@@ -25,6 +25,10 @@ class Features:
     # Some emitting faces emit on their front side only (Mesh.one_sided). Off unless asked for,
     # so a features.json from before it means what it meant: every face two-sided.
     one_sided: bool = False
+    # Next-event estimation with MIS (kernels/nee.h): a light sample at every vertex beside the
+    # BSDF sample. Off: MILO's one-sample mixture of the four strategies (the paper's estimator).
+    # Both converge to the same image; docs/benchmarks.md says which wins where.
+    nee: bool = True
     max_bounces: int = 10
 
     def __post_init__(self):

@@ -235,6 +235,8 @@ class HostScene:
     em_bounds: np.ndarray
     em_children: np.ndarray
     em_one_sided: np.ndarray
+    em_slot: np.ndarray
+    tri_light_pdf: np.ndarray
     bvh: WideBVH
     env_black: bool
 
@@ -265,6 +267,10 @@ class HostScene:
         em_cdf = np.cumsum(em_pmf)
         if len(em_cdf):
             em_cdf[-1] = 1.0
+        em_pdf_area = (em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32)
+        slot_of = np.argsort(order)  # original triangle -> leaf slot
+        tri_light_pdf = np.zeros(len(order), np.float32)
+        tri_light_pdf[slot_of[em_order]] = em_pdf_area
         env_pmf, env_cdf, env_black = environment_distribution(maps.kg)
         h, w = maps.atlas_shape
         return cls(
@@ -284,11 +290,13 @@ class HostScene:
             env_pmf=env_pmf,
             em_v=_as_float4(np.stack([v0[em_order], v1[em_order], v2[em_order]], 1).reshape(-1, 3)),
             em_cdf=em_cdf.astype(np.float32),
-            em_pdf_area=(em_pmf / np.maximum(em_area, 1e-30)).astype(np.float32),
+            em_pdf_area=em_pdf_area,
             num_emitters=len(em_order),
             em_bounds=em_bvh.bounds,
             em_children=em_bvh.children,
             em_one_sided=one_sided[em_order],
+            em_slot=slot_of[em_order].astype(np.int32),
+            tri_light_pdf=tri_light_pdf,
             bvh=bvh,
             env_black=env_black,
         )
@@ -359,4 +367,6 @@ SAMPLING_ARGS = (
     "em_bounds",
     "em_children",
     "em_one_sided",
+    "em_slot",
+    "tri_light_pdf",
 )
