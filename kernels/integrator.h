@@ -4,8 +4,9 @@
  *   BSDF sample, L = sum_b beta_b (w_b E(x_b) + f(wl) E_l w_l / p_l), beta_{b+1} = beta_b f / p_bsdf;
  * - MILO's one-sample mixture (Eq. 4): L = sum_b beta_b E(x_b), beta_{b+1} = beta_b f cos / p_mix,
  *   one ray per bounce.
- * No Russian roulette: a fixed path length, and the adjoint (adjoint.cl) walks the recorded path
- * back. */
+ * Paths end at MAX_BOUNCES, or earlier by Russian roulette from vertex ROULETTE_DEPTH on when it
+ * is compiled in (survival q = min(max(beta), 0.95), beta / q: Mitsuba's rule). The adjoint
+ * (adjoint.cl) walks the recorded path back; 1 / q is part of the recorded 1 / p. */
 #ifndef INVRENDER_INTEGRATOR_H
 #define INVRENDER_INTEGRATOR_H
 
@@ -153,6 +154,16 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         }
         if (!(max3(beta) > 0.0f) && !for_derivative)
             break;
+#ifdef ROULETTE_DEPTH
+        if (bounce + 1 >= ROULETTE_DEPTH && !for_derivative) {
+            float survive = fmin(max3(beta), 0.95f);
+            if (!(rng_uniform4(seed, ray_id, sample, (uint)bounce, RNG_BLOCK_ROULETTE).x < survive))
+                break;
+            beta /= survive;
+            if (vertex)
+                vertex->inv_pdf /= survive;
+        }
+#endif
 #ifdef NEE_ACTIVE
         bsdf_pdf = has_lights(&lights) ? pdf : 0.0f;
 #endif

@@ -99,6 +99,7 @@ inline LightSample sample_light(const SceneData* s, const LightChoice* c, const 
     LightSample ls = {(float3)(0.0f), (float3)(0.0f), 0.0f, -1};
     int target = -1; /* the slot strategy 4 aimed at; -1: strategy 3, whatever the ray meets */
     float3 d = (float3)(0.0f);
+    float tmax = RAY_TMAX; /* strategy 4: just past the point aimed at, a shorter traversal */
     if (u.x < c->env) {
 #ifdef FEATURE_ENV_SAMPLING
         d = sample_environment(s, u.y, u.z, u.w);
@@ -109,14 +110,16 @@ inline LightSample sample_light(const SceneData* s, const LightChoice* c, const 
         float3 y = sample_emitter_point(s, u.y, u.z, u.w, &t);
         if (!emitter_faces(s, t, y, x))
             return ls; /* the back of a one-sided emitter: a spent sample */
-        d = normalize(y - x);
+        float dist = length(y - x);
+        d = (y - x) / dist;
+        tmax = dist * 1.001f;
         target = s->em_slot[t];
 #endif
     }
     if (!(dot(d, n) > 0.0f))
         return ls; /* below the surface: f = 0 */
     Ray ray = make_ray(x, d);
-    Hit hit = bvh_closest_hit(s, &ray, RAY_TMAX, skip);
+    Hit hit = bvh_closest_hit(s, &ray, tmax, skip);
     if (target >= 0 && hit.slot != target)
         return ls; /* occluded */
     SurfacePoint sp;

@@ -10,6 +10,7 @@
 #define RNG_BLOCK_SCATTER 0u /* strategy choice + 3 numbers for the chosen strategy */
 #define RNG_BLOCK_CAMERA 1u  /* pixel jitter (bounce 0) */
 #define RNG_BLOCK_LIGHT 2u   /* light choice + 3 numbers for the light sample (nee.h) */
+#define RNG_BLOCK_ROULETTE 3u /* Russian roulette (x), its own so survival is independent of wi */
 
 inline uint4 philox4x32_10(uint4 ctr, uint2 key)
 {

@@ -30,6 +30,9 @@ class Features:
     # Both converge to the same image; docs/benchmarks.md says which wins where.
     nee: bool = True
     max_bounces: int = 10
+    # Russian roulette from this vertex on (Mitsuba's rr_depth); 0: off, every path runs to
+    # max_bounces (or until it leaves or meets a black texel).
+    roulette_depth: int = 0
 
     def __post_init__(self):
         if self.window and not self.environment:
@@ -38,6 +41,8 @@ class Features:
             raise ValueError("features: env_sampling needs environment")
         if not 0 <= self.max_bounces <= 64:
             raise ValueError(f"features: max_bounces: expected 0..64, got {self.max_bounces}")
+        if not 0 <= self.roulette_depth <= 64:
+            raise ValueError(f"features: roulette_depth: expected 0 (off) ..64, got {self.roulette_depth}")
 
     @classmethod
     def everything(cls, max_bounces: int = 10) -> Features:
@@ -53,7 +58,8 @@ class Features:
         flags = [
             f"-D FEATURE_{f.name.upper()}" for f in fields(self) if f.type in (bool, "bool") and getattr(self, f.name)
         ]
-        return tuple(flags + [f"-D MAX_BOUNCES={self.max_bounces}"])
+        roulette = [f"-D ROULETTE_DEPTH={self.roulette_depth}"] if self.roulette_depth else []
+        return tuple(flags + [f"-D MAX_BOUNCES={self.max_bounces}"] + roulette)
 
     def with_overrides(self, overrides: dict | None) -> Features:
         return replace(self, **(overrides or {}))
