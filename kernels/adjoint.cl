@@ -29,8 +29,6 @@
 #include "lights.h"
 #include "integrator.h"
 
-#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
-
 /* The layouts come from the host (LAYOUT_DEFINES in workflow/invrender/render/adjoint.py, made
  * from the map list of workflow/invrender/scene/types.py): GRAD_KD, GRAD_KS, GRAD_KA, GRAD_KE,
  * GRAD_KW, the first channel of each atlas map in a texel's GRAD_CHANNELS gradient channels, and
@@ -60,6 +58,13 @@ inline void add_grad(global grad_t* target, float value, Accumulator* acc, int m
         expected = seen;
 }
 #else
+/* 64-bit atom_add is an extension (NVIDIA's and AMD's drivers and PoCL report it); the buckets
+ * build above never needs it. The host picks buckets where a device lacks it (render/adjoint.py),
+ * so this only fires on a hand-made build. */
+#ifndef cl_khr_int64_base_atomics
+#error "adjoint.cl: fixed-point accumulation needs cl_khr_int64_base_atomics; build with -D ACCUMULATE_BUCKETS"
+#endif
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 typedef long grad_t;
 
 inline void add_grad(global grad_t* target, float value, Accumulator* acc, int map)

@@ -325,9 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iteration", type=int, default=0, help="which batch of the seed's sequence")
     p.add_argument(
         "--accumulation",
-        choices=["fixed", "buckets"],
-        default="fixed",
-        help="fixed: 64-bit fixed point, bitwise reproducible; buckets: MILO's float copies",
+        choices=["auto", "fixed", "buckets"],
+        default="auto",
+        help="fixed: 64-bit fixed point, bitwise reproducible; buckets: MILO's float copies; "
+        "auto: fixed where the device has 64-bit integer atomics",
     )
     p.add_argument("--device")
     p.set_defaults(func=cmd_gradients)

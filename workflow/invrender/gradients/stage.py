@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..render.adjoint import backward, backward_seed
+from ..render.adjoint import backward, backward_seed, choose_accumulation
 from ..render.batches import ray_batch
 from ..render.features import Features
 from ..render.renderer import Renderer
@@ -60,7 +60,7 @@ def run(
     seed: int = 0,
     iteration: int = 0,
     device: str | None = None,
-    accumulation: str = "fixed",
+    accumulation: str = "auto",
 ) -> dict:
     check_output(out_dir, "gradients")  # before the work, not after it
     spp = require_positive("gradients --spp", "samples per pixel", spp)
@@ -76,6 +76,7 @@ def run(
     residual = radiance.astype(np.float64) - target
     norm = np.linalg.norm(residual, axis=1, keepdims=True)
     adjoint = np.where(norm > 0, residual / np.where(norm > 0, norm, 1), 0.0)  # d ||r|| / d L
+    accumulation = choose_accumulation(renderer.context.devices[0], accumulation)  # the report names the mode run
     grads = backward(renderer, scene.cameras, requests, adjoint, spp, backward_seed(seed), accumulation)
     report = {
         "loss": float(norm.sum()),

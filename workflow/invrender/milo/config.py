@@ -40,7 +40,7 @@ _COMMON = {
     "l2": 1e-6,  # weight decay of MLP 1 (reflectance similarity)
     "regularised_fraction": 0.083,  # texels whose regularisers enter each iteration (the paper's 8.3 %)
     "sky_resolution": 16,  # N of the recovered 6 x N x N kg
-    "accumulation": "fixed",  # the adjoint's: bitwise reproducible
+    "accumulation": "auto",  # the adjoint's: fixed (bitwise reproducible) where the device can
     "seed": 0,
     "checkpoint_every": 50,
     "snapshot_every": 50,  # maps saved for evaluate's accuracy-against-time curve

@@ -4,7 +4,8 @@
 dLoss/dL of each (the gradient of the loss with respect to the ray's estimate) and returns
 d Loss / d map for kd, ks, ka, ke, kw (atlas-shaped) and kg (cube-shaped). The default
 accumulation is 64-bit fixed point, so the same seed gives the same bytes on the same device;
-MILO's bucketed float accumulation is the alternative.
+MILO's bucketed float accumulation is the alternative, and what a device without 64-bit
+integer atomics gets (`choose_accumulation`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..scene.types import ATLAS_MAPS, MAP_CHANNELS, MAP_NAMES, Camera
+from .device import DeviceError, describe
 from .program import build_program
 from .renderer import Renderer
 
@@ -32,7 +34,8 @@ LAYOUT_DEFINES = (
     *(f"-D MAP_{name.upper()}={index}" for index, name in enumerate(MAPS)),
     f"-D GRAD_MAPS={len(MAPS)}",
 )
-ACCUMULATIONS = ("fixed", "buckets")
+ACCUMULATIONS = ("auto", "fixed", "buckets")
+INT64_ATOMICS = "cl_khr_int64_base_atomics"  # 64-bit atom_add, which "fixed" needs
 NUM_BUCKETS = 64  # MILO's count of gradient-map copies
 BUCKET_BUDGET_BYTES = 1 << 30  # fewer copies when 64 of a large atlas would not fit
 # Fixed point: a texel channel takes at most one addition per path vertex, so with the largest
@@ -57,19 +60,19 @@ def backward(
     adjoint: np.ndarray,
     spp: int,
     seed: int = 0,
-    accumulation: str = "fixed",
+    accumulation: str = "auto",
     num_buckets: int = NUM_BUCKETS,
 ) -> dict[str, np.ndarray]:
     """d Loss / d map for every map, given dLoss/dL of each request (n, 3).
 
     accumulation: "fixed" (64-bit fixed-point atomics: the same seed gives the same bytes on one
-    device; the default, see docs/benchmarks.md for its cost) or "buckets" (MILO's float copies
-    chosen by ray id, compare-and-swap adds, then a reduction; not bitwise reproducible).
+    device; see docs/benchmarks.md for its cost), "buckets" (MILO's float copies chosen by ray
+    id, compare-and-swap adds, then a reduction; not bitwise reproducible) or "auto" (the
+    default: "fixed" where the device has 64-bit integer atomics, else "buckets").
     The kernel sees the adjoint divided by its largest magnitude, so the fixed-point range does
     not depend on how the loss is normalised.
     """
-    if accumulation not in ACCUMULATIONS:
-        raise ValueError(f"backward: accumulation: expected one of {ACCUMULATIONS}, got {accumulation!r}")
+    accumulation = choose_accumulation(renderer.context.devices[0], accumulation)
     adjoint = np.asarray(adjoint, np.float32)
     if not np.isfinite(adjoint).all():
         raise ValueError("backward: adjoint: expected finite dLoss/dL for every ray, got NaN or Inf")
@@ -87,8 +90,7 @@ def backward(
             atlas, kg = _fixed_point(launch, len(requests) * spp * (renderer.features.max_bounces + 2))
         else:
             buckets = _bucket_count(num_buckets, sizes)
-            defines = ("-D ACCUMULATE_BUCKETS", f"-D NUM_BUCKETS={buckets}")
-            (atlas, kg), _ = launch(np.float32, buckets, defines, np.ones(len(MAPS)))
+            (atlas, kg), _ = launch(np.float32, buckets, accumulation_defines(buckets), np.ones(len(MAPS)))
             atlas = atlas.reshape(-1, ATLAS_CHANNELS).astype(np.float64)
         atlas, kg = atlas * norm, kg.astype(np.float64) * norm
     atlas = atlas.reshape(host.atlas_h, host.atlas_w, ATLAS_CHANNELS)
@@ -98,6 +100,39 @@ def backward(
     }
     out["kg"] = kg.reshape(6, host.cube_n, host.cube_n, 3)
     return out
+
+
+_told_buckets: set[str] = set()  # devices already named in the log
+
+
+def choose_accumulation(device, accumulation: str = "auto") -> str:
+    """The accumulation mode, "fixed" or "buckets", for `device` (a pyopencl Device: only its
+    `extensions` string is read). Fixed point adds with 64-bit atom_add, an extension
+    (cl_khr_int64_base_atomics) that PoCL, NVIDIA's and AMD's drivers report but OpenCL 1.2 does
+    not require, so "auto" falls back to buckets (32-bit compare-and-swap, core) without it and
+    says so once per device; asking for "fixed" there is an error rather than a build failure
+    deep in the kernel."""
+    if accumulation not in ACCUMULATIONS:
+        raise ValueError(f"backward: accumulation: expected one of {ACCUMULATIONS}, got {accumulation!r}")
+    has_int64 = INT64_ATOMICS in device.extensions.split()
+    if accumulation == "fixed" and not has_int64:
+        raise DeviceError(
+            f"backward: accumulation 'fixed' needs 64-bit integer atomics ({INT64_ATOMICS}), which "
+            f"{describe(device)} does not report; use 'buckets' or 'auto'"
+        )
+    if accumulation != "auto":
+        return accumulation
+    if has_int64:
+        return "fixed"
+    if describe(device) not in _told_buckets:
+        _told_buckets.add(describe(device))
+        log.info("adjoint: %s has no %s: float buckets, not bitwise reproducible", describe(device), INT64_ATOMICS)
+    return "buckets"
+
+
+def accumulation_defines(buckets: int | None) -> tuple[str, ...]:
+    """adjoint.cl's build options for an accumulation mode: fixed point (None) or `buckets` float copies."""
+    return () if buckets is None else ("-D ACCUMULATE_BUCKETS", f"-D NUM_BUCKETS={buckets}")
 
 
 def _fixed_point(launch, additions: int) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +145,7 @@ def _fixed_point(launch, additions: int) -> tuple[np.ndarray, np.ndarray]:
     top = math.floor(62 - math.log2(max(additions, 1)))
     scales = np.full(len(MAPS), 2.0 ** (top - RESOLUTION_BITS // 2))
     for _ in range(2):
-        (atlas, kg), peaks = launch(np.int64, 1, (), scales)
+        (atlas, kg), peaks = launch(np.int64, 1, accumulation_defines(None), scales)
         units = peaks * scales
         off = (peaks > 0) & ((units < 2.0 ** (top - RESOLUTION_BITS)) | (units > 2.0**top))
         if not off.any():
