@@ -22,7 +22,7 @@ import os
 import shutil
 import subprocess
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import fields
+from dataclasses import fields, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -68,7 +68,7 @@ def alone(flag: str) -> Features:
 
 
 def feature_sets() -> dict[str, Features]:
-    sets = {"all on": Features.everything(), "all off": Features.only()}
+    sets = {"all on": replace(Features.everything(), roulette_depth=3), "all off": Features.only()}
     return sets | {f"{flag} alone": alone(flag) for flag in FLAGS}
 
 
@@ -92,8 +92,9 @@ def builds(target: str) -> list[tuple[str, str, tuple[str, ...], tuple[str, ...]
 
 
 def test_every_features_field_is_a_flag_or_the_bounce_count():
-    """The builds below enumerate boolean flags; a field of another kind needs its values named here."""
-    assert {f.name for f in fields(Features)} - set(FLAGS) == {"max_bounces"}
+    """The builds below enumerate boolean flags; a field of another kind needs its values named here
+    (roulette_depth: on in "all on", off elsewhere)."""
+    assert {f.name for f in fields(Features)} - set(FLAGS) == {"max_bounces", "roulette_depth"}
     assert len(feature_sets()) == len(FLAGS) + 2
     assert all(getattr(alone(flag), flag) for flag in FLAGS)
 
