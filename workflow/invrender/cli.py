@@ -246,6 +246,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--specular-threshold", type=float, help="ks at or below which the lobe is compiled out")
     p.add_argument("--max-bounces", type=int, help="upper limit of the bounce count (default 10)")
     p.add_argument("--min-bounces", type=int, help="lower limit of the bounce count (default 1)")
+    p.add_argument(
+        "--roulette-depth",
+        type=int,
+        help="Russian roulette from this vertex on, if paths are longer (default 3; 0: off)",
+    )
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a feature, e.g. specular=false")
     p.add_argument("--device", help="OpenCL device for the escape probe (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_features)

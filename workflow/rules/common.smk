@@ -669,7 +669,13 @@ def synthesize_config(wildcards):
 
 def analysis_options(wildcards):
     """features' analysis settings as flags (--bounce-fraction 0.01 ...)."""
-    keys = ("bounce_fraction", "specular_threshold", "max_bounces", "min_bounces")
+    keys = (
+        "bounce_fraction",
+        "specular_threshold",
+        "max_bounces",
+        "min_bounces",
+        "roulette_depth",
+    )
     return " ".join(
         f"--{key.replace('_', '-')} {config['features'][key]}" for key in keys
     )

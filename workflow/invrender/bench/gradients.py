@@ -65,7 +65,7 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -262,7 +262,7 @@ class InvrenderGradient:
 class MitsubaGradient:
     name = "mitsuba"
 
-    def __init__(self, scene, camera, bounces: int, variant: str, target: np.ndarray):
+    def __init__(self, scene, camera, bounces: int, variant: str, target: np.ndarray, roulette_depth: int = 0):
         from .. import mitsuba as bridge  # noqa: I001 - first: it points drjit at a usable libLLVM
         import drjit as dr
         import mitsuba as mi
@@ -275,7 +275,7 @@ class MitsubaGradient:
             bounces,
             1,
             variant,
-            integrator=bridge.prb_integrator(bounces),
+            integrator=bridge.prb_integrator(bounces, roulette_depth),
         )
         self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
         self.params = mi.traverse(self.scene)
@@ -402,13 +402,13 @@ def reference_agreement(converged: dict) -> dict:
 def equal_error(true, start, covered, camera, bounces: int, settings: Settings, variant: str, device=None):
     from ..render.analysis import analyse
 
-    features = replace(analyse(start, device=device), max_bounces=bounces)
+    features = analyse(start, device=device).with_bounces(bounces)
     target, target_s, _ = clock(target_image, true, camera, features, settings.target_spp, device)
     inv = InvrenderGradient(start, camera, features, target, device)
     inv.warm_up()
     runners = [inv]
     if is_ad_variant(variant):
-        mit = MitsubaGradient(start, camera, bounces, variant, target)
+        mit = MitsubaGradient(start, camera, bounces, variant, target, features.roulette_depth)
         runners.append(mit)
     for runner in runners:
         for spp in sorted({*settings.ladder, settings.ref_pass_spp}):
@@ -611,15 +611,15 @@ def memory_probe(renderer: str, side: int, bounces: int, accumulation: str, vari
     _, start, _ = lambertian_room(side, side)
     camera = start.cameras[ROOM_VIEW]
     target = np.zeros((side, side, 3), np.float32)
+    features = analyse(start, device=device).with_bounces(bounces)
     if renderer == "invrender":
-        features = replace(analyse(start, device=device), max_bounces=bounces)
         runner = InvrenderGradient(start, camera, features, target, device)
         run = lambda: runner.gradient(1, accumulation)  # noqa: E731
         flush = lambda: None  # noqa: E731
     else:
         import drjit as dr
 
-        runner = MitsubaGradient(start, camera, bounces, variant, target)
+        runner = MitsubaGradient(start, camera, bounces, variant, target, features.roulette_depth)
         run = lambda: runner.gradient(1)  # noqa: E731
         flush = dr.flush_malloc_cache
     gc.collect()
@@ -694,7 +694,7 @@ def accumulation_section(start, camera, settings: Settings, device=None) -> list
     rows = []
     target = np.zeros((camera.height, camera.width, 3), np.float32)
     for bounces in settings.bounces:
-        features = replace(analyse(start, device=device), max_bounces=bounces)
+        features = analyse(start, device=device).with_bounces(bounces)
         runner = InvrenderGradient(start, camera, features, target, device)
         for mode in ("fixed", "buckets"):  # kernel builds and first launches out of the timing
             runner.gradient(settings.accumulation_spp, mode)

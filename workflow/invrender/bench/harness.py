@@ -273,7 +273,9 @@ def plot(
     bounces = sorted({c["bounces"] for c in curves})
     fig, axes = plt.subplots(1, len(bounces), figsize=(5 * len(bounces), 4), squeeze=False)
     for ax, b in zip(axes[0], bounces):
-        for name, style in (("invrender", "o-"), ("mitsuba", "s--")):
+        names = sorted({c["renderer"] for c in curves if c["bounces"] == b}, key=lambda n: (n == "mitsuba", n))
+        for name, style in zip(names, ("o-", "^-.", "v:", "d-")):
+            style = "s--" if name == "mitsuba" else style
             pts = [c for c in curves if c["bounces"] == b and c["renderer"] == name]
             ax.loglog([p["wall_s"] for p in pts], [p["rmse"] for p in pts], style, label=name)
         target = [e for e in equal if e["bounces"] == b][0]["target_rmse"]

@@ -71,6 +71,7 @@ log = logging.getLogger("invrender.bench")
 ROOM_VIEW = 2  # the room view that shows the glossy table, the window, floor and walls
 LAUNCH_SAMPLES = 2_000_000  # path samples per launch / Mitsuba pass (as render/renderer.py)
 PROBE_MARK = "BVHPROBE "
+MIXTURE = "invrender mixture"  # the runner of Features(nee=False) in the equal-RMSE ladder
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,7 @@ def _kernel_cached(features, device=None) -> str:
 class InvrenderRunner:
     name = "invrender"
 
-    def __init__(self, scene, camera, features, device=None, host=None, w_env=0.25, w_emit=0.25):
+    def __init__(self, scene, camera, features, device=None, host=None, w_env=None, w_emit=None):
         from ..render.renderer import Renderer
         from ..render.scene_buffers import HostScene
 
@@ -239,7 +240,7 @@ class InvrenderRunner:
 class MitsubaRunner:
     name = "mitsuba"
 
-    def __init__(self, scene, camera, bounces, variant):
+    def __init__(self, scene, camera, bounces, variant, roulette_depth=0):
         from .. import mitsuba as bridge  # noqa: I001 - first: it points drjit at a usable libLLVM
         import mitsuba as mi
 
@@ -247,7 +248,7 @@ class MitsubaRunner:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             scene_dict, self.one_time["convert_s"], _ = clock(
-                bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant
+                bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant, roulette_depth=roulette_depth
             )
         self.bridge_warnings = sorted({str(w.message) for w in caught})
         self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
@@ -327,12 +328,18 @@ def agreement(
 def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
     from ..render.analysis import analyse
 
-    features = replace(analyse(scene, device=device), max_bounces=bounces)
+    features = analyse(scene, device=device).with_bounces(bounces)
     inv = InvrenderRunner(scene, camera, features, device)
     inv.warm_up()
-    mit = MitsubaRunner(scene, camera, bounces, variant)
+    mit = MitsubaRunner(scene, camera, bounces, variant, features.roulette_depth)
     mit.warm_up()
     runners = (inv, mit)
+    # MILO's one-sample mixture, with its own pilot-chosen weights, in the same ladder (not in
+    # the reference): which estimator wins decides Features.nee's default.
+    mixture_features = analyse(scene, overrides={"nee": False}, device=device).with_bounces(bounces)
+    mix = InvrenderRunner(scene, camera, mixture_features, device)
+    mix.name = MIXTURE
+    mix.warm_up()
 
     ref, ref_noise, converged = reference(
         runners, (settings.ref_spp_invrender, settings.ref_spp_mitsuba), f"reference B={bounces}"
@@ -352,15 +359,16 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     # Shuffled: a burst of load from other processes hits a few renders of many rungs, not all
     # repeats of one rung (the medians absorb the former).
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]
+    ladder = (inv, mix, mit)
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="render", leave=False):
-        for runner in runners if rep % 2 == 0 else runners[::-1]:
+        for runner in ladder if rep % 2 == 0 else ladder[::-1]:
             image, wall, cpu = clock(runner.render, spp)
             mse = float(np.mean((image.astype(np.float64) - ref) ** 2))
             records.append({"renderer": runner.name, "spp": spp, "wall": wall, "cpu": cpu, "mse": mse})
 
     pixels = camera.width * camera.height
     curves, summary = [], {}
-    for runner in runners:
+    for runner in ladder:
         rows = []
         for spp in settings.ladder:
             mine = [r for r in records if r["renderer"] == runner.name and r["spp"] == spp]
@@ -399,7 +407,8 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     cpu_mit, _ = time_at_rmse(summary["mitsuba"]["cpu_times"], summary["mitsuba"]["rmses"], target)
     model = {name: fit_model(settings.ladder, summary[name]["times"], summary[name]["rmses"]) for name in summary}
     t_fit = {name: model_time(m, target) for name, m in model.items()}
-    s_inv, s_mit = summary["invrender"], summary["mitsuba"]
+    t_mix, extra_mix = time_at_rmse(summary[MIXTURE]["times"], summary[MIXTURE]["rmses"], target)
+    s_inv, s_mit, s_mix = summary["invrender"], summary["mitsuba"], summary[MIXTURE]
     row = {
         "section": "equal_rmse",
         "bounces": bounces,
@@ -414,7 +423,14 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
         "fit_invrender": model["invrender"],
         "fit_mitsuba": model["mitsuba"],
         "ratio_cpu": cpu_mit / cpu_inv,
-        "extrapolated": bool(extra_inv or extra_mit),
+        "extrapolated": bool(extra_inv or extra_mit or extra_mix),
+        "t_mixture_s": t_mix,
+        "ratio_mixture": t_mit / t_mix,
+        "ratio_mixture_fit": t_fit["mitsuba"] / t_fit[MIXTURE],
+        "var_per_sample_mixture": s_mix["var_per_sample"],
+        "samples_per_s_mixture": s_mix["samples_per_s"],
+        "weights": f"{features.w_env:g}/{features.w_emit:g}",
+        "weights_mixture": f"{mixture_features.w_env:g}/{mixture_features.w_emit:g}",
         "samples_per_s_invrender": s_inv["samples_per_s"],
         "samples_per_s_mitsuba": s_mit["samples_per_s"],
         "speed_ratio": s_inv["samples_per_s"] / s_mit["samples_per_s"],
@@ -717,7 +733,7 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
         )
 
     # Mitsuba at the same depth: time and variance per sample from pairs of independent renders.
-    mit = MitsubaRunner(scene, camera, bounces, variant)
+    mit = MitsubaRunner(scene, camera, bounces, variant, analysed.roulette_depth)
     mit.warm_up()
     walls, images = [], []
     for _ in tqdm(range(max(2, settings.profile_repeats)), desc="profile mitsuba", leave=False):
@@ -779,7 +795,8 @@ def profile_section(scene, camera, settings: Settings, variant: str, device=None
 
 TABLES = {
     "equal_rmse": (
-        "Time to equal RMSE (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender faster)",
+        "Time to equal RMSE (wall clock, median of repeats; ratio = t_mitsuba / t_invrender, > 1: invrender "
+        "faster; invrender = next-event estimation, mixture = MILO's one-sample mixture)",
         [
             ("bounces", "B", "d"),
             ("width", "W", "d"),
@@ -792,6 +809,11 @@ TABLES = {
             ("ratio_cpu", "ratio (CPU time)", ".3f"),
             ("speed_ratio", "samples/s inv/mi", ".3f"),
             ("variance_ratio", "var/sample mi/inv", ".3f"),
+            ("weights", "w_env/w_emit", "s"),
+            ("t_mixture_s", "t mixture [s]", ".3g"),
+            ("ratio_mixture", "ratio mixture", ".3f"),
+            ("ratio_mixture_fit", "(fit)", ".3f"),
+            ("weights_mixture", "mixture w_env/w_emit", "s"),
             ("ref_noise_rmse", "ref noise RMSE", ".2g"),
             ("mean_rel_diff", "mean rel diff", "+.3%"),
             ("mean_rel_sigma", "(1 sigma)", ".3%"),

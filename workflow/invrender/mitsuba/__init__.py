@@ -13,21 +13,22 @@ dependency). One concept per module, as Mitsuba's own plugins:
 - envmap.py: the kg cube map as a lat-long `envmap`;
 - scene.py: `scene_to_mitsuba` (and its Lambertian `scene_to_mitsuba_diffuse`), `render_mitsuba`,
   `render_aovs`, and what Mitsuba cannot express;
-- diffuse.py: Mitsuba's `diffuse` BSDF on our kd atlas and `prb`, for gradients.
+- diffuse.py: Mitsuba's `diffuse` BSDF on our kd atlas, for gradients;
+- integrators.py: `path` and `prb` with our path length and Russian roulette.
 
 Conventions measured on mitsuba 3.9.1 are in each module; tests/mitsuba/ checks them.
 """
 
 from . import llvm  # noqa: F401, I001 - first: sets DRJIT_LIBLLVM_PATH before mitsuba is imported
 from .camera import camera_to_world, sensor_dict
-from .diffuse import diffuse_bsdf, kd_parameter, prb_integrator
+from .diffuse import diffuse_bsdf, kd_parameter
 from .envmap import cube_to_latlong, default_envmap_size, envmap_directions
+from .integrators import path_integrator, prb_integrator, rr_depth
 from .llvm import llvm_available
 from .mesh import mesh_object
 from .milo import KA_MIN, milo_bsdf
 from .scene import (
     lambertian_faces,
-    path_integrator,
     render_aovs,
     render_mitsuba,
     scene_to_mitsuba,
@@ -52,6 +53,7 @@ __all__ = [
     "milo_bsdf",
     "path_integrator",
     "prb_integrator",
+    "rr_depth",
     "render_aovs",
     "render_mitsuba",
     "scene_to_mitsuba",

@@ -17,12 +17,6 @@ def diffuse_bsdf(kd) -> dict:
     return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": bitmap_texture(kd)}}
 
 
-def prb_integrator(max_bounces: int) -> dict:
-    """Mitsuba's path replay backpropagation for B bounces: max_depth = B + 1, no Russian
-    roulette (rr_depth beyond the last bounce), as our integrator."""
-    return {"type": "prb", "max_depth": int(max_bounces) + 1, "rr_depth": int(max_bounces) + 2}
-
-
 def kd_parameter(params) -> str:
     """The key of the kd bitmap of `scene_to_mitsuba_diffuse` in `mi.traverse(scene)`: its data
     is indexed as our atlas (row, column, channel), so its gradient is d/d kd texel by texel."""

@@ -37,16 +37,11 @@ from invrender.scene.types import Camera, Scene
 from .camera import sensor_dict
 from .diffuse import diffuse_bsdf
 from .envmap import cube_to_latlong
+from .integrators import path_integrator
 from .mesh import mesh_object
 from .milo import milo_bsdf
 from .textures import bitmap_texture
 from .variant import DEFAULT_VARIANT, set_variant
-
-
-def path_integrator(max_bounces: int) -> dict:
-    """Mitsuba's `path` for our B bounces: max_depth = B + 1, no Russian roulette (rr_depth
-    beyond the last bounce), as our integrator."""
-    return {"type": "path", "max_depth": int(max_bounces) + 1, "rr_depth": int(max_bounces) + 2, "hide_emitters": False}
 
 
 def lambertian_faces(scene: Scene) -> np.ndarray:
@@ -78,6 +73,7 @@ def scene_to_mitsuba(
     integrator: dict | None = None,
     bsdf: dict | None = None,
     lambertian_native: bool = False,
+    roulette_depth: int = 0,
 ) -> dict:
     """A dict for `mi.load_dict(..., parallel=False)` that renders `scene` as seen by `camera`.
 
@@ -85,7 +81,7 @@ def scene_to_mitsuba(
     texture objects in the dict belong to it). envmap_size = (width, height) of the lat-long
     environment, by default `default_envmap_size(kg)`. `integrator` overrides the path integrator,
     `bsdf` the milo BSDF of the maps (one instance, shared by every mesh). lambertian_native:
-    Mitsuba's `diffuse` on `lambertian_faces` (see above).
+    Mitsuba's `diffuse` on `lambertian_faces` (see above). roulette_depth: ours (0: none).
     """
     set_variant(variant)
     maps, mesh = scene.maps, scene.mesh
@@ -100,7 +96,7 @@ def scene_to_mitsuba(
     bsdf = mi.load_dict(bsdf or milo_bsdf(maps.kd, maps.ks, maps.ka))  # one instance shared by all meshes
     out = {
         "type": "scene",
-        "integrator": integrator or path_integrator(max_bounces),
+        "integrator": integrator or path_integrator(max_bounces, roulette_depth),
         "sensor": sensor_dict(camera, spp, seed),
     }
     kept = ~groups["hole"]

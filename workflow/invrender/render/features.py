@@ -33,6 +33,11 @@ class Features:
     # Russian roulette from this vertex on (Mitsuba's rr_depth); 0: off, every path runs to
     # max_bounces (or until it leaves or meets a black texel).
     roulette_depth: int = 0
+    # Not build flags but run-time weights of the two light strategies: in MILO's mixture their
+    # shares of the one sample (the BSDF lobes get 1 - w_env - w_emit); with nee, only their ratio
+    # counts: the share of light samples that go to the sky. render/tuning.py picks them per scene.
+    w_env: float = 0.25
+    w_emit: float = 0.25
 
     def __post_init__(self):
         if self.window and not self.environment:
@@ -41,6 +46,8 @@ class Features:
             raise ValueError("features: env_sampling needs environment")
         if not 0 <= self.max_bounces <= 64:
             raise ValueError(f"features: max_bounces: expected 0..64, got {self.max_bounces}")
+        if not (self.w_env >= 0 and self.w_emit >= 0 and self.w_env + self.w_emit <= 1):
+            raise ValueError(f"features: w_env, w_emit: expected >= 0 with a sum <= 1, got {self.w_env}, {self.w_emit}")
         if not 0 <= self.roulette_depth <= 64:
             raise ValueError(f"features: roulette_depth: expected 0 (off) ..64, got {self.roulette_depth}")
 
@@ -53,6 +60,12 @@ class Features:
         """Every effect off but those named: a probe that needs primary hits, or a bare path."""
         off = {f.name: False for f in fields(cls) if f.type in (bool, "bool")}
         return cls(**(off | effects), max_bounces=max_bounces)
+
+    def with_bounces(self, max_bounces: int) -> Features:
+        """The same features for another path length; Russian roulette stays only where paths
+        are longer than its start (as render/analysis.py decides it)."""
+        depth = self.roulette_depth if max_bounces > self.roulette_depth else 0
+        return replace(self, max_bounces=max_bounces, roulette_depth=depth)
 
     def defines(self) -> tuple[str, ...]:
         flags = [

@@ -27,8 +27,8 @@ class Renderer:
     """Renders a scene with kernels built for exactly the given features (render/analysis.py
     decides them; the renderer never does).
 
-    w_env and w_emit are the mixture weights of the environment and emitter strategies
-    (MILO uses 0.25 each); they apply only when the feature is compiled in. `proposal`, a test
+    w_env and w_emit, the weights of the environment and emitter strategies, are the features'
+    (Features.w_env, w_emit) unless given; they apply only when the strategy is compiled in. `proposal`, a test
     hook, gives other maps to sample paths from (FIXED_PROPOSAL in kernels/scene_data.h): the
     renders are then importance-sampled estimates of `scene` with a proposal that stays put.
     """
@@ -38,8 +38,8 @@ class Renderer:
         scene: Scene,
         features: Features,
         device: str | None = None,
-        w_env: float = 0.25,
-        w_emit: float = 0.25,
+        w_env: float | None = None,
+        w_emit: float | None = None,
         host_scene: HostScene | None = None,
         proposal: Maps | None = None,
         importance: np.ndarray | None = None,
@@ -50,7 +50,8 @@ class Renderer:
                 f"got {type(features).__name__}"
             )
         self.scene, self.features = scene, features
-        self.w_env, self.w_emit = w_env, w_emit
+        self.w_env = features.w_env if w_env is None else w_env
+        self.w_emit = features.w_emit if w_emit is None else w_emit
         self.context, self.queue = context_and_queue(device)
         self.importance = importance  # HostScene.pack: texels strategy 4 samples besides the emitters
         self.host = host_scene or HostScene.pack(scene.mesh, scene.maps, importance=importance)
