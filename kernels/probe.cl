@@ -11,6 +11,8 @@
 #include "textures.h"
 #include "bsdf.h"
 #include "sampling.h"
+#include "surface.h"
+#include "nee.h"
 
 /* Per case: f cos, and the densities of strategies 1 and 2 (x: diffuse pdf, y: specular pdf). */
 kernel void probe_bsdf(global const float4* materials, global const float4* n, global const float4* wo,
@@ -102,3 +104,39 @@ kernel void probe_camera(global const CameraData* cameras, global const float2* 
     int i = get_global_id(0);
     out[i] = (float4)(camera_direction(cameras, pixel[i].x, pixel[i].y), 0.0f);
 }
+
+#ifdef NEE_ACTIVE
+/* Next-event estimation's light sample from x (already off the surface) with material texel
+ * `texel`: the direction (w = 1 where the sample found a segment to weigh, 0 where it was spent:
+ * occluded, below the surface or the back of a one-sided emitter). */
+kernel void probe_light(SCENE_PARAMS, global const int* texel, global const float4* x, global const float4* n,
+                        global const float4* wo, global const float4* u, global float4* out)
+{
+    int i = get_global_id(0);
+    SCENE_INIT(s);
+    Material m = material_at(&s, texel[i]);
+    MixtureWeights w = mixture_weights(0.0f, 0.0f, &m);
+    LightChoice c = light_choice(&s);
+    int suspect = 0;
+    LightSample ls = sample_light(&s, &c, &w, &m, x[i].xyz, n[i].xyz, wo[i].xyz, -1, u[i], &suspect);
+    out[i] = (float4)(ls.d, ls.weight > 0.0f && !suspect ? 1.0f : 0.0f);
+}
+
+/* The light density of the segment from x along d (to its first hit), 0 for a direction below
+ * the surface or onto the back of a one-sided emitter: what probe_light's directions follow. */
+kernel void probe_light_pdf(SCENE_PARAMS, global const float4* x, global const float4* n, global const float4* d,
+                            global float* pdf_out)
+{
+    int i = get_global_id(0);
+    SCENE_INIT(s);
+    LightChoice c = light_choice(&s);
+    float3 dir = d[i].xyz;
+    Ray ray = make_ray(x[i].xyz, dir);
+    Hit hit = bvh_closest_hit(&s, &ray, RAY_TMAX, -1);
+    SurfacePoint sp;
+    if (hit.slot >= 0)
+        sp = surface_point(&s, &hit, dir);
+    int seen = dot(dir, n[i].xyz) > 0.0f && (hit.slot < 0 || sp.emits);
+    pdf_out[i] = seen ? light_pdf(&s, &c, dir, &hit, &sp) : 0.0f;
+}
+#endif

@@ -104,6 +104,33 @@ class KernelProbe:
         )
         return pdf
 
+    def light(self, texel, x, n, wo, u):
+        """Next-event estimation's light samples: directions (N, 3) and whether each found a
+        segment (N,) (kernels/nee.h)."""
+        count = len(u)
+        bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
+        texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
+        (out,) = self._run(
+            "probe_light",
+            count,
+            [self._in(texel), self._in(bx(x)), self._in(bx(n)), self._in(bx(wo)), self._in(as4(u))],
+            [np.zeros((count, 4), np.float32)],
+            scene=True,
+        )
+        return out[:, :3], out[:, 3] > 0
+
+    def light_pdf(self, x, n, directions):
+        count = len(directions)
+        bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
+        (pdf,) = self._run(
+            "probe_light_pdf",
+            count,
+            [self._in(bx(x)), self._in(bx(n)), self._in(as4(directions))],
+            [np.zeros(count, np.float32)],
+            scene=True,
+        )
+        return pdf
+
     def intersect(self, origins, directions):
         """(t, b1, b2, original triangle or -1) per ray."""
         count = len(origins)

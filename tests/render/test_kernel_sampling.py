@@ -18,7 +18,7 @@ from invrender.scene.types import Maps, Mesh, Scene
 X = np.array([0.0, 0.0, 0.0])  # the shading point, on the floor
 N = np.array([0.0, 1.0, 0.0])
 WO = np.array([0.6, 0.8, 0.0])
-CASES = 7  # chi-square tests in this file, for the Sidak correction
+CASES = 9  # chi-square tests in this file, for the Sidak correction
 
 
 def sky_with_sun(n=8):
@@ -114,6 +114,37 @@ def test_chi_square_of_each_strategy_and_the_mixture(name):
     if scene.mesh.one_sided is not None:  # spent: the samples on the lamp X sees from behind
         behind = emitted_power(scene.mesh, scene.maps)[-2:].sum() / emitted_power(scene.mesh, scene.maps).sum()
         assert abs(1 - result.valid_fraction - behind) < 3e-3, (result.valid_fraction, behind)
+
+
+@pytest.mark.parametrize("one_sided", [False, True], ids=["two-sided", "one-sided"])
+def test_chi_square_of_the_light_sample_of_next_event_estimation(one_sided):
+    """The light sample (kernels/nee.h) against its segment density: strategy 3 or 4 by w_env :
+    w_emit, kept only where the ray's first hit is what strategy 4 aimed at (the low lamp hides
+    part of the high one), above the surface, and not the back of a one-sided lamp. Every such
+    loss is a failure cell of its own, so the density must integrate to exactly the rest."""
+    scene = sampling_scene(0.5, 0.3, 0.05, one_sided=one_sided)
+    probe = KernelProbe(Features.everything(), scene, w_env=0.3, w_emit=0.7)
+    x = X + 1e-4 * N  # off the floor, as the integrator offsets its origins
+    wo = WO / np.linalg.norm(WO)
+    rng = np.random.default_rng(3)
+
+    def sample_fn(n):
+        d, found = probe.light(0, x, N, wo, rng.uniform(0, 1, (n, 4)).astype(np.float32))
+        d = d.astype(np.float64)
+        d[~found] = np.nan
+        return d
+
+    result = chi2_test(
+        sample_fn,
+        lambda d: probe.light_pdf(x, N, d).astype(np.float64),
+        n_samples=400_000,
+        res=(20, 40),
+        sub=64,
+        test_count=CASES,
+    )
+    assert result, result.message
+    assert abs(result.integral - result.valid_fraction) < 2e-3, result.message
+    assert 0.05 < 1 - result.valid_fraction < 0.9, result.valid_fraction  # the failure cells are there
 
 
 def test_chi_square_rejects_a_wrong_density():

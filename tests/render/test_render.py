@@ -46,10 +46,14 @@ def test_diffuse_sphere_under_uniform_sky_is_kd_times_sky(kd, everything):
 
 
 @pytest.mark.parametrize("bounces", [1, 3, 10])
-def test_emitting_enclosure_has_geometric_series_radiance(bounces):
+@pytest.mark.parametrize("nee", [True, False], ids=["nee", "mixture"])
+@pytest.mark.parametrize("roulette_depth", [0, 2], ids=["all", "roulette"])
+def test_emitting_enclosure_has_geometric_series_radiance(bounces, nee, roulette_depth):
+    """The closed form holds for both estimators, with and without Russian roulette (which must
+    stay unbiased: 1/q on every survivor)."""
     kd, ke = 0.6, 1.0
     scene = inside_sphere(kd=kd, ke=ke)
-    features = Features(**(DIFFUSE_ONLY | {"max_bounces": bounces}))
+    features = Features(**(DIFFUSE_ONLY | {"max_bounces": bounces, "nee": nee, "roulette_depth": roulette_depth}))
     out = Renderer(scene, features).render(scene.cameras[0], spp=256, seed=1)
     expected = ke * (1 - kd ** (bounces + 1)) / (1 - kd)
     assert abs(out["radiance"].mean() / expected - 1) < 2e-3
@@ -90,7 +94,10 @@ def test_hard_cases_never_give_nan_or_inf():
 def test_features_of_an_all_diffuse_room_without_windows():
     scene = box_room()
     features, evidence = analyse_scene(scene)
-    assert features == Features(**(DIFFUSE_ONLY | {"max_bounces": features.max_bounces}))
+    bounces = features.max_bounces
+    roulette = AnalysisSettings().roulette_depth if bounces > AnalysisSettings().roulette_depth else 0
+    assert features == Features(**(DIFFUSE_ONLY | {"max_bounces": bounces, "roulette_depth": roulette}))
+    assert evidence["strategy_weights"] is None  # one light strategy: nothing to choose
     lit_outside = box_room()
     lit_outside.maps.kg[:] = 1.0  # a sky, but the closed room hides it: no environment code
     features, evidence = analyse_scene(lit_outside)
