@@ -57,7 +57,7 @@ def test_nee_and_the_mixture_agree_on_the_demo_scenes(name):
     z = diff / sigma
     assert abs(z.mean()) < 4 / np.sqrt(z.size) and np.abs(z).max() < 6, (z.mean(), np.abs(z).max())
     mean_a, mean_b = a["radiance"].mean(), b["radiance"].mean()
-    mean_sigma = np.sqrt((a["variance"].sum() + b["variance"].sum())) / a["variance"].size
+    mean_sigma = np.sqrt(a["variance"].sum() + b["variance"].sum()) / a["variance"].size
     assert abs(mean_a - mean_b) < 3 * mean_sigma + 0.005 * mean_b, (mean_a, mean_b, mean_sigma)
 
 
