@@ -441,6 +441,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="also train the plain-MLP ablation, template: false (default: yes)",
     )
     milo.add_argument("--work", help="where the chain's stages write (default results/bench/milo)")
+    render = p.add_argument_group("bench render")
+    render.add_argument(
+        "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"
+    )
     p.set_defaults(func=cmd_bench)
     return parser
 

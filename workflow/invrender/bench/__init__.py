@@ -20,7 +20,7 @@ from __future__ import annotations
 import importlib
 
 BENCHMARKS = ("render", "gradients", "export", "milo")  # each a module here with run(quick, out, device)
-OPTIONS = {"milo": ("config", "iterations", "ablation", "work")}  # what only some of them take
+OPTIONS = {"milo": ("config", "iterations", "ablation", "work"), "render": ("sections",)}  # what only some take
 
 
 def run_benchmark(what: str, args) -> dict:
@@ -36,7 +36,10 @@ def run_benchmark(what: str, args) -> dict:
     }
     stray = sorted(set(given) - set(OPTIONS.get(what, ())))
     if stray:
-        raise SceneError(f"bench {what}", ", ".join(f"--{key}" for key in stray), "options of bench milo only")
+        owners = {key: name for name, keys in OPTIONS.items() for key in keys}
+        raise SceneError(
+            f"bench {what}", ", ".join(f"--{key}" for key in stray), f"options of bench {owners[stray[0]]} only"
+        )
     run = importlib.import_module(f".{what}", __name__).run
     return run(
         quick=bool(getattr(args, "quick", False)),

@@ -901,15 +901,29 @@ TABLES = {
 # ---------------------------------------------------------------------------------------------
 
 
-def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -> dict:
+SECTIONS = ("equal_rmse", "bvh", "features", "profile")
+
+
+def chosen_sections(sections: str | None) -> tuple[str, ...]:
+    from ..scene.types import SceneError
+
+    chosen = tuple(s.strip() for s in sections.split(",")) if sections else SECTIONS
+    unknown = sorted(set(chosen) - set(SECTIONS))
+    if unknown:
+        raise SceneError("bench render --sections", ",".join(unknown), f"names among {', '.join(SECTIONS)}")
+    return chosen
+
+
+def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, sections: str | None = None) -> dict:
+    chosen = chosen_sections(sections)
     settings, out, variant, notes, started, load_start = start_run(
         "render", QUICK if quick else FULL, out, scalar_settings
     )
 
     scene, _ = room_scene(settings.width, settings.height)
     camera = scene.cameras[settings.view]
-    results = {"equal_rmse": [], "curves": [], "one_time": []}
-    for bounces in tqdm(settings.bounces, desc="equal RMSE", unit="B"):
+    results = {"equal_rmse": [], "curves": [], "one_time": [], "bvh": [], "features": [], "profile": []}
+    for bounces in tqdm(settings.bounces if "equal_rmse" in chosen else (), desc="equal RMSE", unit="B"):
         row, curves, one_time = equal_rmse(scene, camera, bounces, settings, variant, device)
         results["equal_rmse"].append(row)
         results["curves"] += curves
@@ -928,10 +942,12 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
 
     for warning in sorted({w for row in results["equal_rmse"] for w in row["bridge_warnings"]}):
         notes.append(f"mitsuba bridge: {warning}")
-    log.info("BVH at scale ...")
-    results["bvh"] = bvh_section(settings, variant, device)
-    log.info("specialised kernels ...")
-    results["features"] = features_section(scene, camera, settings, device)
+    if "bvh" in chosen:
+        log.info("BVH at scale ...")
+        results["bvh"] = bvh_section(settings, variant, device)
+    if "features" in chosen:
+        log.info("specialised kernels ...")
+        results["features"] = features_section(scene, camera, settings, device)
     for row in results["features"]:
         if row["agreement"] not in ("agree", "not checked"):
             notes.append(
@@ -939,10 +955,13 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
                 f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
                 + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run")
             )
-    log.info("profile ...")
-    results["profile"] = profile_section(scene, camera, settings, variant, device)
+    if "profile" in chosen:
+        log.info("profile ...")
+        results["profile"] = profile_section(scene, camera, settings, variant, device)
 
-    note = plot(results["curves"], results["equal_rmse"], out / "render_rmse_vs_time.png")
+    note = (
+        plot(results["curves"], results["equal_rmse"], out / "render_rmse_vs_time.png") if results["curves"] else None
+    )
     if note:
         notes.append(note)
     report = run_report("render", settings, variant, notes, started, load_start, device, results)
@@ -951,9 +970,8 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None) -
         f"# invrender bench render ({settings.mode}; Mitsuba {variant}; {camera.width}x{camera.height}, "
         f"room view {settings.view}; {report['seconds']:.0f} s)"
     )
-    write_report(
-        out, "render", title, report, TABLES, ("equal_rmse", "one_time", "curves", "bvh", "features", "profile")
-    )
+    ran = [key for key in ("equal_rmse", "one_time", "curves", "bvh", "features", "profile") if results[key]]
+    write_report(out, "render", title, report, TABLES, ran)
     return report
 
 
