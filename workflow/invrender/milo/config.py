@@ -19,6 +19,10 @@ _COMMON = {
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)
     "texture_importance": True,  # strategy 4 also samples texels by their observed brightness
+    # The estimator: MILO's one-sample mixture (its strategy 4 then also draws the light that
+    # brightly lit walls reflect, section 3.5), or next-event estimation (whose light sample
+    # collects only the emission of what it meets). The paper's, as the numbers in docs/milo.md.
+    "nee": False,
     "hard_materials": True,  # render each texel's most probable material (network.hard_through)
     "warm_start_steps": 200,  # MLP 1 fitted to the photographs' brightest texels first (importance.py)
     "warm_start_fraction": 0.3,  # texels seen brighter than this fraction of the brightest start emitting

@@ -80,7 +80,7 @@ def capture_scale(views: Views) -> tuple[float, float]:
 
 def training_features(settings: dict) -> Features:
     """Every effect the maps can express: the analysis cannot decide what training will find."""
-    return Features(one_sided=False, max_bounces=settings["max_bounces"])
+    return Features(one_sided=False, max_bounces=settings["max_bounces"], nee=settings["nee"])
 
 
 def versions() -> dict:
