@@ -93,8 +93,9 @@ def builds(target: str) -> list[tuple[str, str, tuple[str, ...], tuple[str, ...]
 
 def test_every_features_field_is_a_flag_or_the_bounce_count():
     """The builds below enumerate boolean flags; a field of another kind needs its values named here
-    (roulette_depth: on in "all on", off elsewhere)."""
-    assert {f.name for f in fields(Features)} - set(FLAGS) == {"max_bounces", "roulette_depth"}
+    (roulette_depth: on in "all on", off elsewhere; w_env and w_emit are kernel arguments, not
+    build options)."""
+    assert {f.name for f in fields(Features)} - set(FLAGS) == {"max_bounces", "roulette_depth", "w_env", "w_emit"}
     assert len(feature_sets()) == len(FLAGS) + 2
     assert all(getattr(alone(flag), flag) for flag in FLAGS)
 

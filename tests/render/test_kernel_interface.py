@@ -20,7 +20,7 @@ from invrender.scene.types import Maps
 ENTRIES = {
     "render.cl": ("render_rays", "primary_aovs"),
     "adjoint.cl": ("adjoint_rays",),
-    "probe.cl": ("probe_mixture", "probe_mixture_pdf", "probe_intersect"),
+    "probe.cl": ("probe_mixture", "probe_mixture_pdf", "probe_intersect", "probe_light", "probe_light_pdf"),
 }
 FLAGS = Features.everything(max_bounces=2).defines() + LAYOUT_DEFINES + ("-cl-kernel-arg-info",)
 GLOBAL, PRIVATE = cl.kernel_arg_address_qualifier.GLOBAL, cl.kernel_arg_address_qualifier.PRIVATE
@@ -48,7 +48,7 @@ def expected(args: tuple[SceneArg, ...]) -> list[tuple[str, str, int]]:
 
 
 def test_every_entry_kernel_takes_the_scene_arguments_the_host_reads_from_the_header():
-    assert len(SCENE_ARGS) == 23 and SCENE_ARGS[0] == SceneArg("tri_v", "float4", True)
+    assert len(SCENE_ARGS) == 25 and SCENE_ARGS[0] == SceneArg("tri_v", "float4", True)
     for entry, kernels in ENTRIES.items():
         program = built(entry)
         for name in kernels:
