@@ -203,8 +203,7 @@ def measure(runs: dict, spp: int, repeats: int, warm_spp: int = 1) -> dict:
             out[name]["walls"].append(wall)
             out[name]["cpus"].append(cpu)
     return {
-        name: {"s": median(o["walls"]), "cpu_per_wall": median(o["cpus"]) / median(o["walls"]), "rss_mb": o["rss_mb"]}
-        for name, o in out.items()
+        name: {"s": median(o["walls"]), "cpu_s": median(o["cpus"]), "rss_mb": o["rss_mb"]} for name, o in out.items()
     }
 
 
@@ -218,13 +217,19 @@ def pass_row(section: str, camera, spp: int, passes: Passes, stats: dict) -> dic
         "pixels": camera.width * camera.height,
         "spp": spp,
         "forward_s": f["s"],
+        "forward_cpu_s": f["cpu_s"],
         "forward_us_per_sample": 1e6 * f["s"] / samples,
+        "forward_cpu_us_per_sample": 1e6 * f["cpu_s"] / samples,
         "gradient_s": g["s"],
+        "gradient_cpu_s": g["cpu_s"],
         "gradient_us_per_sample": 1e6 * g["s"] / samples,
+        "gradient_cpu_us_per_sample": 1e6 * g["cpu_s"] / samples,
         "backward_s": passes.grad.last.get("backward_s"),
         "forward_rss_mb": f["rss_mb"],
         "gradient_rss_mb": g["rss_mb"],
-        "cpu_per_wall": f["cpu_per_wall"],
+        # CPU seconds of all the process's threads per wall second: the share of the cores the
+        # renderer had (2 on an idle 2-core machine); wall times are trustworthy only near it.
+        "cpu_per_wall": f["cpu_s"] / f["s"],
     }
 
 
@@ -283,7 +288,10 @@ def triangles_probe(triangles: int, settings: Settings, variant: str | None, dev
         row["mitsuba_load_s"] = mitsuba.one_time["load_s"]
         row["mitsuba_s"] = stats["mitsuba"]["s"]
         row["mitsuba_us_per_sample"] = 1e6 * stats["mitsuba"]["s"] / samples
+        row["mitsuba_cpu_us_per_sample"] = 1e6 * stats["mitsuba"]["cpu_s"] / samples
         row["ratio"] = stats["mitsuba"]["s"] / stats["forward"]["s"]
+        row["ratio_cpu"] = stats["mitsuba"]["cpu_s"] / stats["forward"]["cpu_s"]
+        row["mitsuba_cpu_per_wall"] = stats["mitsuba"]["cpu_s"] / stats["mitsuba"]["s"]
     return row
 
 
@@ -338,15 +346,22 @@ FITTED = (
     ("triangles", "triangles", "pack_rss_mb", "MB"),
     ("triangles", "triangles", "device_mb", "MB"),
     ("triangles", "triangles", "forward_us_per_sample", "us"),
+    ("triangles", "triangles", "forward_cpu_us_per_sample", "CPU us"),
     ("triangles", "triangles", "gradient_us_per_sample", "us"),
+    ("triangles", "triangles", "gradient_cpu_us_per_sample", "CPU us"),
     ("triangles", "triangles", "mitsuba_us_per_sample", "us"),
+    ("triangles", "triangles", "mitsuba_cpu_us_per_sample", "CPU us"),
     ("triangles", "triangles", "mitsuba_load_s", "s"),
     ("pixels", "pixels", "forward_s", "s"),
+    ("pixels", "pixels", "forward_cpu_s", "CPU s"),
     ("pixels", "pixels", "gradient_s", "s"),
+    ("pixels", "pixels", "gradient_cpu_s", "CPU s"),
     ("pixels", "pixels", "forward_rss_mb", "MB"),
     ("pixels", "pixels", "gradient_rss_mb", "MB"),
     ("spp", "spp", "forward_s", "s"),
+    ("spp", "spp", "forward_cpu_s", "CPU s"),
     ("spp", "spp", "gradient_s", "s"),
+    ("spp", "spp", "gradient_cpu_s", "CPU s"),
     ("spp", "spp", "forward_rss_mb", "MB"),
     ("spp", "spp", "gradient_rss_mb", "MB"),
 )
@@ -378,46 +393,54 @@ def sweep_factor(rows: list[dict], x_key: str, per_sample: str, x0: float, x: fl
 
 
 def predict(results: dict, fits: list[dict], settings: Settings) -> list[dict]:
-    """The cost of N triangles at W x H and S spp: the triangle sweep's per-sample time at N
-    (its power law; beside it the log-log interpolation between the measured sizes) times W H S,
-    times the image factor: how per-sample time changes from the triangle sweep's image and spp
-    to W x H and S, as the pixel and spp sweeps measured it (`sweep_factor`). Mitsuba's uses
-    invrender's forward factor (only its triangle sweep is measured). Memory: the scene's from
-    the triangle sweep, a pass's from the pixel sweep."""
+    """The cost of N triangles at W x H and S spp, on the wall clock and in CPU seconds: the
+    triangle sweep's per-sample time at N (its power law; beside it the log-log interpolation
+    between the measured sizes) times W H S, times the image factor: how per-sample time changes
+    from the triangle sweep's image and spp to W x H and S, as the pixel and spp sweeps measured
+    it (`sweep_factor`). Mitsuba's uses invrender's forward factor (only its triangle sweep is
+    measured). CPU rows also give CPU / cores: the wall time when the renderer has every core
+    (PoCL and drjit both use them all). Memory: the scene's from the triangle sweep, a pass's
+    from the pixel sweep."""
+    import os
+
     triangles, width, height, spp = settings.predict
     pixels = width * height
     p0, s0 = settings.tri_width * settings.tri_height, settings.tri_spp
+    cores = os.cpu_count() or 1
     rows = []
-    for kind, per_sample, image_key in (
-        ("forward render", "forward_us_per_sample", "forward_us_per_sample"),
-        ("gradient pass", "gradient_us_per_sample", "gradient_us_per_sample"),
-        ("mitsuba path (forward)", "mitsuba_us_per_sample", "forward_us_per_sample"),
-    ):
-        fit = _fit(fits, "triangles", per_sample)
-        if fit is None:
-            continue
-        f_p = sweep_factor(results["pixels"], "pixels", image_key, p0, pixels)
-        f_s = sweep_factor(results["spp"], "spp", image_key, s0, spp)
-        factor = (f_p or 1.0) * (f_s or 1.0)
-        samples = pixels * spp
-        measured = [r for r in results["triangles"] if r.get(per_sample) is not None]
-        between = loglog_interpolate([r["triangles"] for r in measured], [r[per_sample] for r in measured], triangles)
-        rows.append(
-            {
-                "section": "prediction",
-                "what": kind,
-                "triangles": triangles,
-                "width": width,
-                "height": height,
-                "spp": spp,
-                "us_per_sample": power_law_at(fit, triangles),
-                "pixel_factor": f_p,
-                "spp_factor": f_s,
-                "image_factor": factor,
-                "predicted_s": 1e-6 * power_law_at(fit, triangles) * samples * factor,
-                "interpolated_s": None if between is None else 1e-6 * between * samples * factor,
-            }
-        )
+    for clock_name, cpu in (("wall", ""), ("CPU", "cpu_")):
+        for kind, per_sample, image_key in (
+            ("forward render", f"forward_{cpu}us_per_sample", f"forward_{cpu}us_per_sample"),
+            ("gradient pass", f"gradient_{cpu}us_per_sample", f"gradient_{cpu}us_per_sample"),
+            ("mitsuba path (forward)", f"mitsuba_{cpu}us_per_sample", f"forward_{cpu}us_per_sample"),
+        ):
+            fit = _fit(fits, "triangles", per_sample)
+            if fit is None:
+                continue
+            f_p = sweep_factor(results["pixels"], "pixels", image_key, p0, pixels)
+            f_s = sweep_factor(results["spp"], "spp", image_key, s0, spp)
+            factor = (f_p or 1.0) * (f_s or 1.0)
+            samples = pixels * spp
+            measured = [r for r in results["triangles"] if r.get(per_sample) is not None]
+            xs, ys = [r["triangles"] for r in measured], [r[per_sample] for r in measured]
+            between = loglog_interpolate(xs, ys, triangles)
+            predicted = 1e-6 * power_law_at(fit, triangles) * samples * factor
+            rows.append(
+                {
+                    "section": "prediction",
+                    "what": f"{kind}, {clock_name} [s]",
+                    "triangles": triangles,
+                    "width": width,
+                    "height": height,
+                    "spp": spp,
+                    "us_per_sample": power_law_at(fit, triangles),
+                    "pixel_factor": f_p,
+                    "spp_factor": f_s,
+                    "predicted": predicted,
+                    "interpolated": None if between is None else 1e-6 * between * samples * factor,
+                    "all_cores_wall_s": predicted / cores if cpu else None,
+                }
+            )
     for kind, sweep, quantity, x in (
         ("HostScene.pack [s]", "triangles", "pack_s", triangles),
         ("device buffers [MB]", "triangles", "device_mb", triangles),
@@ -436,8 +459,8 @@ def predict(results: dict, fits: list[dict], settings: Settings) -> list[dict]:
                 "width": width,
                 "height": height,
                 "spp": spp,
-                "predicted_s": power_law_at(fit, x),
-                "interpolated_s": loglog_interpolate(xs, [r[quantity] for r in results[sweep]], x),
+                "predicted": power_law_at(fit, x),
+                "interpolated": loglog_interpolate(xs, [r[quantity] for r in results[sweep]], x),
             }
         )
     return rows
@@ -449,7 +472,8 @@ def predict(results: dict, fits: list[dict], settings: Settings) -> list[dict]:
 
 TABLES = {
     "triangles": (
-        "Triangles: packing, memory, and time per sample at a fixed image (ratio = t_mitsuba / t_invrender)",
+        "Triangles: packing, memory, and time per sample at a fixed image, wall clock and process CPU "
+        "(ratio = t_mitsuba / t_invrender)",
         [
             ("triangles", "triangles", "d"),
             ("build_s", "BVH build [s]", ".3f"),
@@ -457,12 +481,16 @@ TABLES = {
             ("pack_rss_mb", "pack RSS growth [MB]", ".1f"),
             ("device_mb", "device buffers [MB]", ".1f"),
             ("peak_rss_mb", "process peak RSS [MB]", ".0f"),
-            ("forward_us_per_sample", "forward [us/sample]", ".3f"),
-            ("gradient_us_per_sample", "gradient [us/sample]", ".3f"),
-            ("mitsuba_us_per_sample", "mitsuba [us/sample]", ".3f"),
+            ("forward_us_per_sample", "forward [us]", ".3f"),
+            ("forward_cpu_us_per_sample", "(CPU us)", ".3f"),
+            ("gradient_us_per_sample", "gradient [us]", ".3f"),
+            ("gradient_cpu_us_per_sample", "(CPU us)", ".3f"),
+            ("mitsuba_us_per_sample", "mitsuba [us]", ".3f"),
+            ("mitsuba_cpu_us_per_sample", "(CPU us)", ".3f"),
             ("ratio", "ratio", ".2f"),
+            ("ratio_cpu", "ratio (CPU)", ".2f"),
             ("mitsuba_load_s", "mi load [s]", ".2f"),
-            ("cpu_per_wall", "cpu/wall", ".2f"),
+            ("cpu_per_wall", "inv cpu/wall", ".2f"),
         ],
     ),
     "pixels": (
@@ -472,11 +500,14 @@ TABLES = {
             ("height", "H", "d"),
             ("spp", "spp", "d"),
             ("forward_s", "forward [s]", ".4f"),
+            ("forward_cpu_s", "(CPU s)", ".4f"),
             ("gradient_s", "gradient [s]", ".4f"),
-            ("forward_us_per_sample", "forward [us/sample]", ".3f"),
-            ("gradient_us_per_sample", "gradient [us/sample]", ".3f"),
+            ("gradient_cpu_s", "(CPU s)", ".4f"),
+            ("forward_cpu_us_per_sample", "forward [CPU us/sample]", ".3f"),
+            ("gradient_cpu_us_per_sample", "gradient [CPU us/sample]", ".3f"),
             ("forward_rss_mb", "forward RSS [MB]", ".1f"),
             ("gradient_rss_mb", "gradient RSS [MB]", ".1f"),
+            ("cpu_per_wall", "cpu/wall", ".2f"),
         ],
     ),
     "spp": (
@@ -486,11 +517,14 @@ TABLES = {
             ("height", "H", "d"),
             ("spp", "spp", "d"),
             ("forward_s", "forward [s]", ".4f"),
+            ("forward_cpu_s", "(CPU s)", ".4f"),
             ("gradient_s", "gradient [s]", ".4f"),
-            ("forward_us_per_sample", "forward [us/sample]", ".3f"),
-            ("gradient_us_per_sample", "gradient [us/sample]", ".3f"),
+            ("gradient_cpu_s", "(CPU s)", ".4f"),
+            ("forward_cpu_us_per_sample", "forward [CPU us/sample]", ".3f"),
+            ("gradient_cpu_us_per_sample", "gradient [CPU us/sample]", ".3f"),
             ("forward_rss_mb", "forward RSS [MB]", ".1f"),
             ("gradient_rss_mb", "gradient RSS [MB]", ".1f"),
+            ("cpu_per_wall", "cpu/wall", ".2f"),
         ],
     ),
     "fits": (
@@ -521,8 +555,9 @@ TABLES = {
             ("us_per_sample", "us/sample", ".3f"),
             ("pixel_factor", "pixel factor", ".3f"),
             ("spp_factor", "spp factor", ".3f"),
-            ("predicted_s", "predicted [s or MB]", ".4g"),
-            ("interpolated_s", "interpolated", ".4g"),
+            ("predicted", "predicted", ".4g"),
+            ("interpolated", "interpolated", ".4g"),
+            ("all_cores_wall_s", "CPU / cores [s]", ".4g"),
         ],
     ),
 }
@@ -539,13 +574,13 @@ def plot_scaling(results: dict, path) -> str | None:
         (
             "triangles",
             "triangles",
-            "time per sample [us]",
-            ("forward_us_per_sample", "gradient_us_per_sample", "mitsuba_us_per_sample"),
+            "CPU time per sample [us]",
+            ("forward_cpu_us_per_sample", "gradient_cpu_us_per_sample", "mitsuba_cpu_us_per_sample"),
         ),
         ("triangles", "triangles", "one-time [s]", ("build_s", "pack_rest_s", "mitsuba_load_s")),
         ("triangles", "triangles", "memory [MB]", ("device_mb", "pack_rss_mb", "peak_rss_mb")),
-        ("pixels", "pixels", "one call [s]", ("forward_s", "gradient_s")),
-        ("spp", "spp", "one call [s]", ("forward_s", "gradient_s")),
+        ("pixels", "pixels", "one call [s]", ("forward_s", "forward_cpu_s", "gradient_s", "gradient_cpu_s")),
+        ("spp", "spp", "one call [s]", ("forward_s", "forward_cpu_s", "gradient_s", "gradient_cpu_s")),
         ("pixels", "pixels", "peak RSS growth [MB]", ("forward_rss_mb", "gradient_rss_mb")),
     )
     fig, axes = plt.subplots(2, 3, figsize=(15, 8))
