@@ -11,7 +11,16 @@ import numpy as np
 import pytest
 
 import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
-from invrender.bench.scaling import QUICK, SECTIONS, loglog_interpolate, power_law, predict, sweep_factor
+from invrender.bench.scaling import (
+    QUICK,
+    SECTIONS,
+    from_the_points,
+    loglog_interpolate,
+    power_law,
+    power_law_at,
+    predict,
+    sweep_factor,
+)
 from invrender.cli import main
 from invrender.synthesize.room import make_room
 
@@ -144,7 +153,7 @@ def test_prediction_arithmetic_on_exact_laws():
     assert forward["pixel_factor"] == pytest.approx(0.5)  # 640 x 480 lies beyond 4 p0: held at 4 p0
     assert forward["spp_factor"] == pytest.approx(1.0)
     assert forward["predicted"] == pytest.approx(1e-6 * 2 * 500_000**0.25 * samples * 0.5)
-    assert forward["interpolated"] == pytest.approx(forward["predicted"])
+    assert forward["power_law"] == pytest.approx(forward["predicted"])
     assert gradient["predicted"] == pytest.approx(1e-6 * 6 * 500_000**0.25 * samples)
     assert not any(what.startswith("mitsuba") or "CPU" in what for what in out)  # nothing fitted, nothing predicted
 
@@ -153,6 +162,16 @@ def test_loglog_interpolation_and_sweep_factor_are_exact_on_power_laws():
     xs = [1.0, 10.0, 100.0]
     assert loglog_interpolate(xs, [x**0.5 for x in xs], 40.0) == pytest.approx(40.0**0.5)
     assert loglog_interpolate(xs, [1.0, 2.0, 3.0], 1000.0) is None
+    # A fixed cost plus a linear part: beyond the points, the largest one scaled by the top
+    # exponent, not the overall power law (which the fixed cost bends).
+    xs = [1e3, 1e4, 1e5, 1e6]
+    ys = [5.0 + 1e-2 * x for x in xs]
+    fit, truth = power_law(xs, ys), 5.0 + 1e-2 * 4e6
+    assert fit["k"] < fit["k_top"] < 1.0
+    assert from_the_points(xs, ys, 4e6, fit) == pytest.approx(ys[-1] * 4.0 ** fit["k_top"])
+    assert from_the_points(xs, ys, 4e6, fit) == pytest.approx(truth, rel=0.02)
+    assert abs(power_law_at(fit, 4e6) / truth - 1) > 0.05
+    assert from_the_points(xs, ys, 1e4, fit) == pytest.approx(ys[1])
     rows = [{"spp": s, "t": 5.0 * s**-0.3} for s in (1, 4, 16, 64)]
     assert sweep_factor(rows, "spp", "t", 4, 32) == pytest.approx((32 / 4) ** -0.3)
     assert sweep_factor(rows, "spp", "t", 4, 256) == pytest.approx((64 / 4) ** -0.3)  # held beyond 64

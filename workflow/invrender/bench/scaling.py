@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 from dataclasses import dataclass, replace
 
@@ -160,6 +161,19 @@ def loglog_interpolate(xs, ys, x: float) -> float | None:
     return float(np.exp(np.interp(math.log(x), np.log(xs[order]), np.log(ys[order]))))
 
 
+def from_the_points(xs, ys, x: float, fit: dict) -> float | None:
+    """y at x from the measured points: log-log interpolation between them, and beyond the
+    largest (smallest) y there times (x / x there)^k with the fit's top (overall) exponent: the
+    points carry the offsets a single power law misses (fixed costs at small x)."""
+    between = loglog_interpolate(xs, ys, x)
+    if between is not None or fit is None:
+        return between
+    xs, ys = np.asarray(xs, np.float64), np.asarray(ys, np.float64)
+    end = int(np.argmax(xs)) if x > xs.max() else int(np.argmin(xs))
+    k = fit["k_top"] if x > xs.max() else fit["k"]
+    return float(ys[end] * (x / xs[end]) ** k)
+
+
 # ---------------------------------------------------------------------------------------------
 # Measuring (inside a probe process)
 # ---------------------------------------------------------------------------------------------
@@ -230,6 +244,7 @@ def pass_row(section: str, camera, spp: int, passes: Passes, stats: dict) -> dic
         # CPU seconds of all the process's threads per wall second: the share of the cores the
         # renderer had (2 on an idle 2-core machine); wall times are trustworthy only near it.
         "cpu_per_wall": f["cpu_s"] / f["s"],
+        "load_1min": os.getloadavg()[0],  # the machine's, as the measurement ended
     }
 
 
@@ -352,6 +367,7 @@ FITTED = (
     ("triangles", "triangles", "mitsuba_us_per_sample", "us"),
     ("triangles", "triangles", "mitsuba_cpu_us_per_sample", "CPU us"),
     ("triangles", "triangles", "mitsuba_load_s", "s"),
+    ("triangles", "triangles", "peak_rss_mb", "MB"),
     ("pixels", "pixels", "forward_s", "s"),
     ("pixels", "pixels", "forward_cpu_s", "CPU s"),
     ("pixels", "pixels", "gradient_s", "s"),
@@ -394,19 +410,17 @@ def sweep_factor(rows: list[dict], x_key: str, per_sample: str, x0: float, x: fl
 
 def predict(results: dict, fits: list[dict], settings: Settings) -> list[dict]:
     """The cost of N triangles at W x H and S spp, on the wall clock and in CPU seconds: the
-    triangle sweep's per-sample time at N (its power law; beside it the log-log interpolation
-    between the measured sizes) times W H S, times the image factor: how per-sample time changes
-    from the triangle sweep's image and spp to W x H and S, as the pixel and spp sweeps measured
-    it (`sweep_factor`). Mitsuba's uses invrender's forward factor (only its triangle sweep is
-    measured). CPU rows also give CPU / cores: the wall time when the renderer has every core
-    (PoCL and drjit both use them all). Memory: the scene's from the triangle sweep, a pass's
-    from the pixel sweep."""
-    import os
-
+    triangle sweep's per-sample time at N (`from_the_points`; beside it its power law) times
+    W H S, times the image factor: how per-sample time changes from the triangle sweep's image
+    and spp to W x H and S, as the pixel and spp sweeps measured it (`sweep_factor`). Mitsuba's
+    uses invrender's forward factor (only its triangle sweep is measured). CPU rows also give
+    CPU / cores: the wall time when the renderer has every core (PoCL and drjit both use them
+    all). Memory: the scene's from the triangle sweep, a pass's from the pixel sweep."""
     triangles, width, height, spp = settings.predict
     pixels = width * height
     p0, s0 = settings.tri_width * settings.tri_height, settings.tri_spp
     cores = os.cpu_count() or 1
+    where = {"triangles": triangles, "width": width, "height": height, "spp": spp}
     rows = []
     for clock_name, cpu in (("wall", ""), ("CPU", "cpu_")):
         for kind, per_sample, image_key in (
@@ -419,48 +433,41 @@ def predict(results: dict, fits: list[dict], settings: Settings) -> list[dict]:
                 continue
             f_p = sweep_factor(results["pixels"], "pixels", image_key, p0, pixels)
             f_s = sweep_factor(results["spp"], "spp", image_key, s0, spp)
-            factor = (f_p or 1.0) * (f_s or 1.0)
-            samples = pixels * spp
+            seconds = 1e-6 * pixels * spp * (f_p or 1.0) * (f_s or 1.0)  # per us of a sample at N
             measured = [r for r in results["triangles"] if r.get(per_sample) is not None]
-            xs, ys = [r["triangles"] for r in measured], [r[per_sample] for r in measured]
-            between = loglog_interpolate(xs, ys, triangles)
-            predicted = 1e-6 * power_law_at(fit, triangles) * samples * factor
+            us = from_the_points([r["triangles"] for r in measured], [r[per_sample] for r in measured], triangles, fit)
             rows.append(
                 {
                     "section": "prediction",
                     "what": f"{kind}, {clock_name} [s]",
-                    "triangles": triangles,
-                    "width": width,
-                    "height": height,
-                    "spp": spp,
-                    "us_per_sample": power_law_at(fit, triangles),
+                    **where,
+                    "us_per_sample": us,
                     "pixel_factor": f_p,
                     "spp_factor": f_s,
-                    "predicted": predicted,
-                    "interpolated": None if between is None else 1e-6 * between * samples * factor,
-                    "all_cores_wall_s": predicted / cores if cpu else None,
+                    "predicted": us * seconds,
+                    "power_law": power_law_at(fit, triangles) * seconds,
+                    "all_cores_wall_s": us * seconds / cores if cpu else None,
                 }
             )
     for kind, sweep, quantity, x in (
         ("HostScene.pack [s]", "triangles", "pack_s", triangles),
         ("device buffers [MB]", "triangles", "device_mb", triangles),
         ("RSS growth while packing [MB]", "triangles", "pack_rss_mb", triangles),
+        ("process peak RSS, triangle sweep [MB]", "triangles", "peak_rss_mb", triangles),
+        ("RSS growth of a forward render [MB]", "pixels", "forward_rss_mb", pixels),
         ("RSS growth of a gradient pass [MB]", "pixels", "gradient_rss_mb", pixels),
     ):
         fit = _fit(fits, sweep, quantity)
         if fit is None:
             continue
-        xs = [r["triangles" if sweep == "triangles" else "pixels"] for r in results[sweep]]
+        xs, ys = [r[sweep] for r in results[sweep]], [r[quantity] for r in results[sweep]]
         rows.append(
             {
                 "section": "prediction",
                 "what": kind,
-                "triangles": triangles,
-                "width": width,
-                "height": height,
-                "spp": spp,
-                "predicted": power_law_at(fit, x),
-                "interpolated": loglog_interpolate(xs, [r[quantity] for r in results[sweep]], x),
+                **where,
+                "predicted": from_the_points(xs, ys, x, fit),
+                "power_law": power_law_at(fit, x),
             }
         )
     return rows
@@ -491,6 +498,7 @@ TABLES = {
             ("ratio_cpu", "ratio (CPU)", ".2f"),
             ("mitsuba_load_s", "mi load [s]", ".2f"),
             ("cpu_per_wall", "inv cpu/wall", ".2f"),
+            ("load_1min", "load", ".1f"),
         ],
     ),
     "pixels": (
@@ -508,6 +516,7 @@ TABLES = {
             ("forward_rss_mb", "forward RSS [MB]", ".1f"),
             ("gradient_rss_mb", "gradient RSS [MB]", ".1f"),
             ("cpu_per_wall", "cpu/wall", ".2f"),
+            ("load_1min", "load", ".1f"),
         ],
     ),
     "spp": (
@@ -525,6 +534,7 @@ TABLES = {
             ("forward_rss_mb", "forward RSS [MB]", ".1f"),
             ("gradient_rss_mb", "gradient RSS [MB]", ".1f"),
             ("cpu_per_wall", "cpu/wall", ".2f"),
+            ("load_1min", "load", ".1f"),
         ],
     ),
     "fits": (
@@ -545,7 +555,8 @@ TABLES = {
         ],
     ),
     "prediction": (
-        "Prediction (power laws above; 'interpolated': between the measured sizes instead)",
+        "Prediction from the measured points (log-log between them; beyond, the top exponent), "
+        "beside it the power law above",
         [
             ("what", "what", "s"),
             ("triangles", "triangles", "d"),
@@ -556,7 +567,7 @@ TABLES = {
             ("pixel_factor", "pixel factor", ".3f"),
             ("spp_factor", "spp factor", ".3f"),
             ("predicted", "predicted", ".4g"),
-            ("interpolated", "interpolated", ".4g"),
+            ("power_law", "(power law)", ".4g"),
             ("all_cores_wall_s", "CPU / cores [s]", ".4g"),
         ],
     ),
