@@ -7,6 +7,9 @@
   Blender's own interpreter; docs/export.md, "Blender").
 - ``export``: what the USD export loses: round trip, standard view, GGX in Mitsuba 3 (``export.py``;
   docs/export.md).
+- ``scaling``: time and memory against triangles (1 k to 1 M), pixels and spp, with fitted
+  exponents and a worked prediction; Mitsuba 3 beside the triangle sweep (``scaling.py``;
+  docs/benchmarks.md, "Scaling").
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
 
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 import importlib
 
-BENCHMARKS = ("render", "gradients", "export", "milo")  # each a module here with run(quick, out, device)
+BENCHMARKS = ("render", "gradients", "export", "milo", "scaling")  # each a module here with run(quick, out, device)
 OPTIONS = {"milo": ("config", "iterations", "ablation", "work"), "render": ("sections",)}  # what only some take
 
 

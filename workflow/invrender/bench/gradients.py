@@ -58,11 +58,9 @@ import argparse
 import contextlib
 import gc
 import inspect
-import json
 import logging
 import math
 import os
-import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -80,8 +78,10 @@ from .harness import (
     model_time,
     next_seed_block,
     plot,
+    print_probe,
     quiet_pyopencl,
     room_scene,
+    run_probe,
     run_report,
     time_at_rmse,
     verdict,
@@ -655,31 +655,12 @@ def memory_section(settings: Settings, variant: str, accumulations, device=None)
         cases.append(("mitsuba", "-"))
     rows = []
     for renderer, accumulation in tqdm(cases, desc="memory", unit="probe", leave=False):
-        command = [
-            sys.executable,
-            "-m",
-            "invrender.bench.gradients",
-            "memory-probe",
-            "--renderer",
-            renderer,
-            "--side",
-            str(settings.memory_side),
-            "--bounces",
-            str(settings.memory_bounces),
-            "--accumulation",
-            accumulation,
-            "--variant",
-            variant,
-        ]
+        args = ["memory-probe", "--renderer", renderer, "--side", settings.memory_side]
+        args += ["--bounces", settings.memory_bounces, "--accumulation", accumulation, "--variant", variant]
         if device:
-            command += ["--device", device]
-        proc = subprocess.run(command, capture_output=True, text=True, env={**os.environ, **PROBE_ENV})
-        lines = [line for line in proc.stdout.splitlines() if line.startswith(PROBE_MARK)]
-        if proc.returncode != 0 or not lines:
-            raise RuntimeError(
-                f"memory probe ({renderer}, {accumulation}) failed with code {proc.returncode}:\n{proc.stderr[-4000:]}"
-            )
-        rows.append(json.loads(lines[-1][len(PROBE_MARK) :]))
+            args += ["--device", device]
+        what = f"memory probe ({renderer}, {accumulation})"
+        rows.append(run_probe("invrender.bench.gradients", args, PROBE_MARK, what, env=PROBE_ENV))
     return rows
 
 
@@ -943,7 +924,7 @@ def _main(argv=None) -> int:
     args = parser.parse_args(argv)
     quiet_pyopencl()
     result = memory_probe(args.renderer, args.side, args.bounces, args.accumulation, args.variant, args.device)
-    print(PROBE_MARK + json.dumps(result), flush=True)
+    print_probe(PROBE_MARK, result)
     return 0
 
 

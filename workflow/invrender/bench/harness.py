@@ -101,6 +101,29 @@ class PeakRSS:
         return False
 
 
+def run_probe(module: str, args, mark: str, what: str, env: dict | None = None) -> dict:
+    """Run `python -m module args` in its own process (so that its peak memory is its own) and
+    return the JSON it printed after `mark` (`print_probe`); its stderr in the error if it failed."""
+    command = [sys.executable, "-m", module, *map(str, args)]
+    proc = subprocess.run(command, capture_output=True, text=True, env={**os.environ, **(env or {})})
+    lines = [line for line in proc.stdout.splitlines() if line.startswith(mark)]
+    if proc.returncode != 0 or not lines:
+        raise RuntimeError(f"{what} failed with code {proc.returncode}:\n{proc.stderr[-4000:]}")
+    return json.loads(lines[-1][len(mark) :])
+
+
+def print_probe(mark: str, result: dict):
+    print(mark + json.dumps(result), flush=True)
+
+
+def scene_buffer_bytes(host) -> tuple[int, int]:
+    """(all device buffers, the geometry's: triangles and BVH) of a HostScene, in bytes."""
+    from ..render.scene_buffers import GEOMETRY_ARGS, SCENE_ARGS
+
+    arrays = {arg.name: getattr(host, arg.name) for arg in SCENE_ARGS if arg.buffer}
+    return sum(a.nbytes for a in arrays.values()), sum(arrays[k].nbytes for k in GEOMETRY_ARGS)
+
+
 # ---------------------------------------------------------------------------------------------
 # What is compared
 # ---------------------------------------------------------------------------------------------
@@ -185,6 +208,15 @@ def time_at_rmse(times, rmses, target) -> tuple[float, bool]:
     return float(math.exp(math.log(t0) + s * (math.log(t1) - math.log(t0)))), False
 
 
+def pairwise_slopes(x, y) -> np.ndarray:
+    """(y_j - y_i) / (x_j - x_i) over every pair i < j with x_i != x_j: their median is the
+    Theil-Sen slope, which one point timed during a burst of load does not move."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    i, j = np.triu_indices(len(x), 1)
+    keep = x[j] != x[i]
+    return (y[j] - y[i])[keep] / (x[j] - x[i])[keep]
+
+
 def fit_model(spps, times, rmses) -> dict:
     """RMSE = k / sqrt(spp) and t = a + b spp, i.e. RMSE = k sqrt(b) / sqrt(t - a): the
     c / sqrt(t) law with a fixed per-call cost a. k = median of rmse sqrt(spp) over the upper
@@ -193,8 +225,7 @@ def fit_model(spps, times, rmses) -> dict:
     spps, times, rmses = (np.asarray(v, np.float64) for v in (spps, times, rmses))
     half = len(spps) // 2
     k = median(rmses[half:] * np.sqrt(spps[half:]))
-    pairs = [(times[j] - times[i]) / (spps[j] - spps[i]) for i in range(len(spps)) for j in range(i + 1, len(spps))]
-    b = max(median(pairs), 1e-30)
+    b = max(median(pairwise_slopes(spps, times)), 1e-30)
     a = median(times - b * spps)
     return {"k": k, "a": a, "b": b}
 
@@ -253,6 +284,18 @@ def write_csv(path: Path, rows: list[dict]):
             writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
 
 
+def pyplot():
+    """matplotlib.pyplot drawing to files, or None: matplotlib is optional (plots are skipped)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    return plt
+
+
 def plot(
     curves: list[dict],
     equal: list[dict],
@@ -263,12 +306,8 @@ def plot(
 ) -> str | None:
     """RMSE against time, log-log, one panel per bounce count. Returns a note if skipped.
     Rows: curves with bounces, renderer, wall_s, rmse; equal with bounces, target_rmse."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return f"matplotlib is not installed: plot skipped (the curves are in {curves_csv})"
     bounces = sorted({c["bounces"] for c in curves})
     fig, axes = plt.subplots(1, len(bounces), figsize=(5 * len(bounces), 4), squeeze=False)

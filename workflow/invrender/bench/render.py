@@ -38,10 +38,8 @@ error arithmetic, the report) is harness.py.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
-import subprocess
 import sys
 import warnings
 from dataclasses import asdict, dataclass, replace
@@ -57,9 +55,12 @@ from .harness import (
     model_time,
     next_seed_block,
     plot,
+    print_probe,
     quiet_pyopencl,
     room_scene,
+    run_probe,
     run_report,
+    scene_buffer_bytes,
     start_run,
     time_at_rmse,
     verdict,
@@ -504,7 +505,7 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
 
     from ..render.bvh import build_bvh, triangle_vertices
     from ..render.features import Features
-    from ..render.scene_buffers import GEOMETRY_ARGS, SCENE_ARGS, HostScene
+    from ..render.scene_buffers import HostScene
     from ..scene.types import Scene
 
     base, _ = room_scene(settings.width, settings.height)
@@ -524,9 +525,7 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
     tracemalloc.stop()
 
     host, pack_wall, _ = clock(HostScene.pack, mesh, scene.maps, bvh)
-    arrays = {arg.name: getattr(host, arg.name) for arg in SCENE_ARGS if arg.buffer}
-    total_bytes = sum(a.nbytes for a in arrays.values())
-    geometry_bytes = sum(arrays[k].nbytes for k in GEOMETRY_ARGS)
+    total_bytes, geometry_bytes = scene_buffer_bytes(host)
     result = {
         "section": "bvh",
         "triangles": int(len(mesh.faces)),
@@ -568,31 +567,14 @@ def bvh_probe(triangles: int, settings: Settings, device=None, variant: str | No
 def bvh_section(settings: Settings, variant: str, device=None) -> list[dict]:
     rows = []
     for triangles in tqdm(settings.bvh_triangles, desc="bvh sizes", unit="size", leave=False):
-        command = [
-            sys.executable,
-            "-m",
-            "invrender.bench.render",
-            "bvh-probe",
-            "--triangles",
-            str(triangles),
-            "--mode",
-            settings.mode,
-            "--variant",
-            variant,
-        ]
+        args = ["bvh-probe", "--triangles", triangles, "--mode", settings.mode, "--variant", variant]
         if settings.width:
-            command += ["--width", str(settings.width), "--height", str(settings.height)]
+            args += ["--width", settings.width, "--height", settings.height]
         if not settings.bvh_mitsuba:
-            command += ["--no-mitsuba"]
+            args += ["--no-mitsuba"]
         if device:
-            command += ["--device", device]
-        proc = subprocess.run(command, capture_output=True, text=True)
-        lines = [line for line in proc.stdout.splitlines() if line.startswith(PROBE_MARK)]
-        if proc.returncode != 0 or not lines:
-            raise RuntimeError(
-                f"bvh probe ({triangles} triangles) failed with code {proc.returncode}:\n{proc.stderr[-4000:]}"
-            )
-        rows.append(json.loads(lines[-1][len(PROBE_MARK) :]))
+            args += ["--device", device]
+        rows.append(run_probe("invrender.bench.render", args, PROBE_MARK, f"bvh probe ({triangles} triangles)"))
     return rows
 
 
@@ -996,7 +978,7 @@ def _main(argv=None) -> int:
     )
     quiet_pyopencl()
     result = bvh_probe(args.triangles, settings, args.device, args.variant)
-    print(PROBE_MARK + json.dumps(result), flush=True)
+    print_probe(PROBE_MARK, result)
     return 0
 
 
