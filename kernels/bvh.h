@@ -18,6 +18,9 @@ typedef struct {
     float t;      /* RAY_TMAX on a miss */
     int slot;     /* leaf slot of the triangle hit, -1 on a miss */
     float b1, b2; /* barycentrics of vertices 1 and 2 */
+#ifdef BVH_STATS
+    int nodes, tris; /* nodes and triangles visited (kernels/traversal.cl) */
+#endif
 } Hit;
 
 /* Entry distances of the eight lanes; lanes missed get +inf. Near and far planes are chosen by
@@ -61,6 +64,9 @@ inline float3 tri_vertex(global const float4* v, int slot, int k) { return v[3 *
 inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int skip)
 {
     Hit hit = {tmax, -1, 0.0f, 0.0f};
+#ifdef BVH_STATS
+    hit.nodes = hit.tris = 0;
+#endif
     int stack[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
     int top = 0;
@@ -71,6 +77,9 @@ inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int ski
         if (stack_t[top] > hit.t)
             continue;
         int node = stack[top];
+#ifdef BVH_STATS
+        ++hit.nodes;
+#endif
         float8 entry = bvh_lane_entry(s->bvh_bounds, node, r, hit.t);
         int8 child = s->bvh_children[2 * node], count = s->bvh_children[2 * node + 1];
         /* Leaves now, inner nodes pushed far to near so the nearest is popped first. */
@@ -82,6 +91,9 @@ inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int ski
             int n = lane_int(count, i), c = lane_int(child, i);
             if (n > 0) {
                 for (int slot = c; slot < c + n; ++slot) {
+#ifdef BVH_STATS
+                    ++hit.tris;
+#endif
                     float t, b1, b2;
                     if (slot != skip &&
                         intersect_triangle(r, tri_vertex(s->tri_v, slot, 0),
