@@ -26,7 +26,7 @@ typedef struct {
 /* Entry distances of the eight lanes; lanes missed get +inf. Near and far planes are chosen by
  * the sign of the direction, not by min/max, so empty lanes (+inf..-inf) are always missed.
  * The far distance is widened by 2 gamma(3) (Ize 2013) so float rounding never drops a box the
- * ray touches. */
+ * ray touches. Comparisons with ?: rather than fmin/fmax/select: PoCL calls those out of line. */
 inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r, float tmax)
 {
     global const float8* b = bounds + 6 * node;
@@ -37,10 +37,37 @@ inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r
     float8 tfx = (b[3 - 3 * sx] - r->o.x) * r->inv_d.x;
     float8 tfy = (b[4 - 3 * sy] - r->o.y) * r->inv_d.y;
     float8 tfz = (b[5 - 3 * sz] - r->o.z) * r->inv_d.z;
-    float8 tnear = fmax(fmax(tnx, tny), fmax(tnz, (float8)(0.0f)));
-    float8 tfar = fmin(fmin(tfx, tfy), fmin(tfz, (float8)(tmax))) * 1.0000004f;
-    return select((float8)(INFINITY), tnear, tnear <= tfar);
+    float8 tnear = tnx > tny ? tnx : tny;
+    tnear = tnear > tnz ? tnear : tnz;
+    tnear = tnear > 0.0f ? tnear : (float8)(0.0f);
+    float8 tfar = tfx < tfy ? tfx : tfy;
+    tfar = tfar < tfz ? tfar : tfz;
+    tfar = (tfar < tmax ? tfar : (float8)(tmax)) * 1.0000004f;
+    return tnear <= tfar ? tnear : (float8)(INFINITY);
 }
+
+/* Bit i set where lane i of a comparison result (-1 / 0) is true. */
+inline uint lane_mask(int8 m)
+{
+    int8 bits = m & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 a = bits.lo | bits.hi;
+    int2 b = a.lo | a.hi;
+    return (uint)(b.x | b.y);
+}
+
+/* Index of the lowest set bit of a nonzero mask: the exponent of the float it converts to,
+ * exactly (a power of two), where OpenCL 1.2 has no ctz and PoCL calls clz out of line. */
+inline int lowest_lane(uint mask) { return (as_int((float)(mask & -mask)) >> 23) - 127; }
+
+/* Lanes of a vector by index, without vstore8 (PoCL calls it out of line). */
+typedef union {
+    float8 v;
+    float s[8];
+} LanesF;
+typedef union {
+    int8 v;
+    int s[8];
+} LanesI;
 
 inline float lane(float8 v, int i)
 {
@@ -60,7 +87,10 @@ inline int lane_int(int8 v, int i)
 
 inline float3 tri_vertex(global const float4* v, int slot, int k) { return v[3 * slot + k].xyz; }
 
-/* Closest hit along r in (0, tmax), ignoring triangle slot `skip` (the one the ray leaves). */
+/* Closest hit along r in (0, tmax), ignoring triangle slot `skip` (the one the ray leaves).
+ * Per node: the lanes hit, as a bit mask; their leaves' triangles first (in lane order), then
+ * the inner lanes pushed far to near, so the nearest is popped first, and popped entries
+ * farther than the hit so far are dropped. */
 inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int skip)
 {
     Hit hit = {tmax, -1, 0.0f, 0.0f};
@@ -69,57 +99,56 @@ inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int ski
 #endif
     int stack[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
-    int top = 0;
-    stack[top] = 0;
-    stack_t[top++] = 0.0f;
-    while (top > 0) {
-        --top;
-        if (stack_t[top] > hit.t)
-            continue;
-        int node = stack[top];
+    int top = 0, node = 0;
+    for (;;) {
 #ifdef BVH_STATS
         ++hit.nodes;
 #endif
         float8 entry = bvh_lane_entry(s->bvh_bounds, node, r, hit.t);
         int8 child = s->bvh_children[2 * node], count = s->bvh_children[2 * node + 1];
-        /* Leaves now, inner nodes pushed far to near so the nearest is popped first. */
-        int pushed = 0;
-        for (int i = 0; i < 8; ++i) {
-            float ti = lane(entry, i);
-            if (!(ti <= hit.t))
-                continue;
-            int n = lane_int(count, i), c = lane_int(child, i);
-            if (n > 0) {
-                for (int slot = c; slot < c + n; ++slot) {
+        uint lanes = lane_mask(entry <= hit.t);
+        LanesF e = {entry};
+        LanesI c = {child}, n = {count};
+        for (uint leaves = lanes & lane_mask(count > 0); leaves; leaves &= leaves - 1) {
+            int i = lowest_lane(leaves);
+            for (int slot = c.s[i]; slot < c.s[i] + n.s[i]; ++slot) {
 #ifdef BVH_STATS
-                    ++hit.tris;
+                ++hit.tris;
 #endif
-                    float t, b1, b2;
-                    if (slot != skip &&
-                        intersect_triangle(r, tri_vertex(s->tri_v, slot, 0),
-                                           tri_vertex(s->tri_v, slot, 1),
-                                           tri_vertex(s->tri_v, slot, 2), hit.t, &t, &b1, &b2)) {
-                        hit.t = t;
-                        hit.slot = slot;
-                        hit.b1 = b1;
-                        hit.b2 = b2;
-                    }
+                float t, b1, b2;
+                if (slot != skip &&
+                    intersect_triangle(r, tri_vertex(s->tri_v, slot, 0), tri_vertex(s->tri_v, slot, 1),
+                                       tri_vertex(s->tri_v, slot, 2), hit.t, &t, &b1, &b2)) {
+                    hit.t = t;
+                    hit.slot = slot;
+                    hit.b1 = b1;
+                    hit.b2 = b2;
                 }
-            } else if (n == 0 && top < BVH_STACK_SIZE) {
-                /* insertion into the sorted tail of the stack: descending entry distance */
-                int j = top++;
-                while (j > top - 1 - pushed && stack_t[j - 1] < ti) {
-                    stack[j] = stack[j - 1];
-                    stack_t[j] = stack_t[j - 1];
-                    --j;
-                }
-                stack[j] = c;
-                stack_t[j] = ti;
-                ++pushed;
             }
         }
+        int first = top;
+        for (uint inner = lanes & lane_mask(count == 0); inner; inner &= inner - 1) {
+            int i = lowest_lane(inner);
+            float ti = e.s[i];
+            if (top >= BVH_STACK_SIZE)
+                break;
+            /* insertion into the sorted tail of the stack: descending entry distance */
+            int j = top++;
+            while (j > first && stack_t[j - 1] < ti) {
+                stack[j] = stack[j - 1];
+                stack_t[j] = stack_t[j - 1];
+                --j;
+            }
+            stack[j] = c.s[i];
+            stack_t[j] = ti;
+        }
+        do {
+            if (top == 0)
+                return hit;
+            --top;
+        } while (stack_t[top] > hit.t);
+        node = stack[top];
     }
-    return hit;
 }
 
 #endif

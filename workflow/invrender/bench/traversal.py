@@ -86,8 +86,8 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
         times = []
         if prog is program:
             for _ in range(settings.repeats):
-                times.append(clock(run, prog, "closest_hits", len(o), *args, o_buf, d_buf, out_buf)[1])
-        return out, times
+                times.append(clock(run, prog, "closest_hits", len(o), *args, o_buf, d_buf, out_buf)[1:])
+        return out, np.array(times).reshape(-1, 2)
 
     count = camera.width * camera.height * settings.spp
     o1, d1 = empty(count), empty(count)
@@ -109,8 +109,8 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
               "bvh_bytes": int(host.bvh_bounds.nbytes + host.bvh_children.nbytes)}
     for key, rays, times in (("camera", count, t1), ("bounce", len(o2), t2)):
         result[f"{key}_rays"] = rays
-        result[f"{key}_rays_per_s"] = rays / median(times)
-    result["rays_per_s"] = (count + len(o2)) / (median(t1) + median(t2))
+        result[f"{key}_rays_per_s"] = rays / median(times[:, 0])
+        result[f"{key}_rays_per_cpu_s"] = rays / median(times[:, 1])
     try:  # visits per ray, from a build that counts them
         stats = build_program(context, "traversal.cl", ("-D BVH_STATS",))
         for key, o, d in (("camera", o1, d1), ("bounce", o2, d2)):
@@ -123,8 +123,9 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
     bare = Features.only(max_bounces=1, emission=True, environment=True, window=True)
     render = InvrenderRunner(scene, camera, bare, device, host=host)
     render.warm_up()
-    walls = [clock(render.render, settings.spp)[1] for _ in range(settings.repeats)]
-    result["render_b1_rays_per_s"] = 2 * camera.width * camera.height * settings.spp / median(walls)
+    times = np.array([clock(render.render, settings.spp)[1:] for _ in range(settings.repeats)])
+    result["render_b1_rays_per_s"] = 2 * count / median(times[:, 0])
+    result["render_b1_rays_per_cpu_s"] = 2 * count / median(times[:, 1])
     if hits_path:
         tri = lambda h: np.where(h[:, 3].view(np.int32) < 0, -1, host.tri_id[np.maximum(h[:, 3].view(np.int32), 0)])
         np.savez(hits_path, camera_tri=tri(h1), camera_t=h1[:, 0], bounce_tri=tri(h2), bounce_t=h2[:, 0])
@@ -174,27 +175,29 @@ def compare(settings: Settings, device=None, baseline: Path | None = None) -> li
                 for name, tree in trees if r % 2 == 0 else trees[::-1]:
                     runs[name].append(_probe_process(tree, size, settings, device, Path(tmp) / f"{name}.npz"))
             for name, _ in trees:
-                row = {"tree": name, "rounds": len(runs[name])}
-                for key, value in runs[name][0].items():
-                    values = [run[key] for run in runs[name] if key in run]
-                    row[key] = median(values) if key.endswith("per_s") or key.endswith("_s") else value
+                row = dict(runs[name][0], tree=name, rounds=len(runs[name]))
+                for key in (k for k in row if k.endswith("_s")):
+                    row[key] = median([run[key] for run in runs[name]])
                 rows.append(row)
             if baseline:
+                # Ratios of the runs side by side in one round, median over the rounds.
+                for key in (k for k in rows[-1] if k.endswith("per_s") or k.endswith("per_cpu_s")):
+                    ratios = [a[key] / b[key] for a, b in zip(runs["this"], runs["baseline"])]
+                    rows[-2]["x_" + key.replace("_rays_per", "")] = median(ratios)
                 this, base = (np.load(Path(tmp) / f"{name}.npz") for name in ("this", "baseline"))
                 rows[-2].update(_same_hits(this, base))
-                rows[-2]["speedup_camera"] = rows[-2]["camera_rays_per_s"] / rows[-1]["camera_rays_per_s"]
-                rows[-2]["speedup_bounce"] = rows[-2]["bounce_rays_per_s"] / rows[-1]["bounce_rays_per_s"]
-                rows[-2]["speedup_render"] = rows[-2]["render_b1_rays_per_s"] / rows[-1]["render_b1_rays_per_s"]
     return rows
 
 
 COLUMNS = [("tree", "tree", "s"), ("triangles", "triangles", "d"), ("bvh_bytes", "BVH bytes", "d"),
            ("camera_rays_per_s", "camera rays/s", ".3g"), ("bounce_rays_per_s", "bounce rays/s", ".3g"),
            ("render_b1_rays_per_s", "B=1 render rays/s", ".3g"),
+           ("camera_rays_per_cpu_s", "camera rays/cpu-s", ".3g"), ("bounce_rays_per_cpu_s", "bounce rays/cpu-s", ".3g"),
            ("camera_nodes_per_ray", "nodes/ray cam", ".1f"), ("camera_tris_per_ray", "tris/ray cam", ".1f"),
            ("bounce_nodes_per_ray", "nodes/ray bounce", ".1f"), ("bounce_tris_per_ray", "tris/ray bounce", ".1f"),
-           ("speedup_camera", "x cam", ".2f"), ("speedup_bounce", "x bounce", ".2f"),
-           ("speedup_render", "x render", ".2f"), ("camera_same_triangle", "same tri cam", ".5f"),
+           ("x_camera_s", "x cam", ".2f"), ("x_bounce_s", "x bounce", ".2f"), ("x_render_b1_s", "x render", ".2f"),
+           ("x_camera_cpu_s", "x cam cpu", ".2f"), ("x_bounce_cpu_s", "x bounce cpu", ".2f"),
+           ("x_render_b1_cpu_s", "x render cpu", ".2f"), ("camera_same_triangle", "same tri cam", ".5f"),
            ("bounce_same_triangle", "same tri bounce", ".5f"), ("bounce_max_rel_dt", "max rel dt", ".1e")]
 
 
