@@ -87,6 +87,60 @@ inline int lane_int(int8 v, int i)
 
 inline float3 tri_vertex(global const float4* v, int slot, int k) { return v[3 * slot + k].xyz; }
 
+inline float8 abs8(float8 v) { return as_float8(as_int8(v) & (int8)(0x7fffffff)); }
+
+/* The up to 8 triangles of leaf block L (rows v0 xyz, v1 xyz, v2 xyz, slot) against r at once:
+ * intersect_triangle's arithmetic lane by lane, in the same order and without contraction, so
+ * every value is the one it computes. What depends on the closest hit so far (the comparison
+ * with hit->t) runs per candidate lane in slot order, as the one-at-a-time loop did, and lanes
+ * with an edge function exactly 0 go through intersect_triangle itself (its fp64 fallback).
+ * Hence the same hit, to the bit, as testing the triangles one by one. */
+inline void intersect_leaf(global const float8* L, int n, const Ray* r, int skip, Hit* hit)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    int kz = r->kz, kx = kz == 2 ? 0 : kz + 1, ky = kz == 0 ? 2 : (kz == 1 ? 0 : 1);
+    float3 o = rotate_to_z(r->o, kz);
+    const float3 S = r->shear;
+    float8 az = L[kz] - o.z, bz = L[3 + kz] - o.z, cz = L[6 + kz] - o.z;
+    float8 asx = (L[kx] - o.x) - S.x * az, asy = (L[ky] - o.y) - S.y * az;
+    float8 bsx = (L[3 + kx] - o.x) - S.x * bz, bsy = (L[3 + ky] - o.y) - S.y * bz;
+    float8 csx = (L[6 + kx] - o.x) - S.x * cz, csy = (L[6 + ky] - o.y) - S.y * cz;
+    float8 asz = S.z * az, bsz = S.z * bz, csz = S.z * cz;
+    LanesF U = {csx * bsy - csy * bsx}, V = {asx * csy - asy * csx}, W = {bsx * asy - bsy * asx};
+    LanesF det = {U.v + V.v + W.v}, T = {U.v * asz + V.v * bsz + W.v * csz};
+    LanesF sdet = {abs8(det.v)}, sT = {det.v < 0.0f ? -T.v : T.v};
+    int8 zero = (U.v == 0.0f) | (V.v == 0.0f) | (W.v == 0.0f);
+    int8 outside = ((U.v < 0.0f) | (V.v < 0.0f) | (W.v < 0.0f)) & ((U.v > 0.0f) | (V.v > 0.0f) | (W.v > 0.0f));
+    int8 live = (int8)(0, 1, 2, 3, 4, 5, 6, 7) < n;
+    uint candidates = lane_mask(live & (zero | (~outside & (det.v != 0.0f) & (sT.v > 0.0f))));
+    uint edge = lane_mask(zero);
+    LanesI slots = {as_int8(L[9])};
+    for (; candidates; candidates &= candidates - 1) {
+        int i = lowest_lane(candidates);
+        if (slots.s[i] == skip)
+            continue;
+        float t, b1, b2;
+        if ((edge >> i) & 1) {
+            LanesF x0 = {L[0]}, y0 = {L[1]}, z0 = {L[2]}, x1 = {L[3]}, y1 = {L[4]}, z1 = {L[5]};
+            LanesF x2 = {L[6]}, y2 = {L[7]}, z2 = {L[8]};
+            if (!intersect_triangle(r, (float3)(x0.s[i], y0.s[i], z0.s[i]), (float3)(x1.s[i], y1.s[i], z1.s[i]),
+                                    (float3)(x2.s[i], y2.s[i], z2.s[i]), hit->t, &t, &b1, &b2))
+                continue;
+        } else {
+            if (!(sT.s[i] < hit->t * sdet.s[i]))
+                continue;
+            float inv = 1.0f / det.s[i];
+            t = T.s[i] * inv;
+            b1 = V.s[i] * inv;
+            b2 = W.s[i] * inv;
+        }
+        hit->t = t;
+        hit->slot = slots.s[i];
+        hit->b1 = b1;
+        hit->b2 = b2;
+    }
+}
+
 /* Closest hit along r in (0, tmax), ignoring triangle slot `skip` (the one the ray leaves).
  * Per node: the lanes hit, as a bit mask; their leaves' triangles first (in lane order), then
  * the inner lanes pushed far to near, so the nearest is popped first, and popped entries
@@ -111,20 +165,10 @@ inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int ski
         LanesI c = {child}, n = {count};
         for (uint leaves = lanes & lane_mask(count > 0); leaves; leaves &= leaves - 1) {
             int i = lowest_lane(leaves);
-            for (int slot = c.s[i]; slot < c.s[i] + n.s[i]; ++slot) {
 #ifdef BVH_STATS
-                ++hit.tris;
+            hit.tris += n.s[i];
 #endif
-                float t, b1, b2;
-                if (slot != skip &&
-                    intersect_triangle(r, tri_vertex(s->tri_v, slot, 0), tri_vertex(s->tri_v, slot, 1),
-                                       tri_vertex(s->tri_v, slot, 2), hit.t, &t, &b1, &b2)) {
-                    hit.t = t;
-                    hit.slot = slot;
-                    hit.b1 = b1;
-                    hit.b2 = b2;
-                }
-            }
+            intersect_leaf(s->bvh_leaves + 10 * c.s[i], n.s[i], r, skip, &hit);
         }
         int first = top;
         for (uint inner = lanes & lane_mask(count == 0); inner; inner &= inner - 1) {

@@ -105,8 +105,16 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
     o2, d2 = o2[keep], d2[keep]
     h2, t2 = trace(program, o2, d2)
 
-    result = {"triangles": int(len(scene.mesh.faces)), "nodes": host.bvh.n_nodes, "pack_s": pack_s,
-              "bvh_bytes": int(host.bvh_bounds.nbytes + host.bvh_children.nbytes)}
+    result = {
+        "triangles": int(len(scene.mesh.faces)),
+        "nodes": host.bvh.n_nodes,
+        "pack_s": pack_s,
+        "tri_v_bytes": host.tri_v.nbytes,
+        # nodes and, where the tree has them, leaf blocks (triangles tested by the traversal)
+        "bvh_bytes": sum(
+            getattr(host, k).nbytes for k in ("bvh_bounds", "bvh_children", "bvh_leaves") if hasattr(host, k)
+        ),
+    }
     for key, rays, times in (("camera", count, t1), ("bounce", len(o2), t2)):
         result[f"{key}_rays"] = rays
         result[f"{key}_rays_per_s"] = rays / median(times[:, 0])
@@ -133,8 +141,18 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
 
 
 def _probe_process(tree: Path, triangles: int, settings: Settings, device, hits_path) -> dict:
-    command = [sys.executable, "-m", "invrender.bench.traversal", "probe", "--triangles", str(triangles),
-               "--settings", json.dumps(asdict(settings)), "--hits", str(hits_path)]
+    command = [
+        sys.executable,
+        "-m",
+        "invrender.bench.traversal",
+        "probe",
+        "--triangles",
+        str(triangles),
+        "--settings",
+        json.dumps(asdict(settings)),
+        "--hits",
+        str(hits_path),
+    ]
     if device:
         command += ["--device", device]
     env = dict(os.environ, PYTHONPATH=str(tree / "workflow"))
@@ -142,7 +160,7 @@ def _probe_process(tree: Path, triangles: int, settings: Settings, device, hits_
     lines = [line for line in proc.stdout.splitlines() if line.startswith(MARK)]
     if proc.returncode != 0 or not lines:
         raise RuntimeError(f"traversal probe in {tree} failed ({proc.returncode}):\n{proc.stderr[-4000:]}")
-    return json.loads(lines[-1][len(MARK):])
+    return json.loads(lines[-1][len(MARK) :])
 
 
 def _same_hits(a, b) -> dict:
@@ -189,16 +207,30 @@ def compare(settings: Settings, device=None, baseline: Path | None = None) -> li
     return rows
 
 
-COLUMNS = [("tree", "tree", "s"), ("triangles", "triangles", "d"), ("bvh_bytes", "BVH bytes", "d"),
-           ("camera_rays_per_s", "camera rays/s", ".3g"), ("bounce_rays_per_s", "bounce rays/s", ".3g"),
-           ("render_b1_rays_per_s", "B=1 render rays/s", ".3g"),
-           ("camera_rays_per_cpu_s", "camera rays/cpu-s", ".3g"), ("bounce_rays_per_cpu_s", "bounce rays/cpu-s", ".3g"),
-           ("camera_nodes_per_ray", "nodes/ray cam", ".1f"), ("camera_tris_per_ray", "tris/ray cam", ".1f"),
-           ("bounce_nodes_per_ray", "nodes/ray bounce", ".1f"), ("bounce_tris_per_ray", "tris/ray bounce", ".1f"),
-           ("x_camera_s", "x cam", ".2f"), ("x_bounce_s", "x bounce", ".2f"), ("x_render_b1_s", "x render", ".2f"),
-           ("x_camera_cpu_s", "x cam cpu", ".2f"), ("x_bounce_cpu_s", "x bounce cpu", ".2f"),
-           ("x_render_b1_cpu_s", "x render cpu", ".2f"), ("camera_same_triangle", "same tri cam", ".5f"),
-           ("bounce_same_triangle", "same tri bounce", ".5f"), ("bounce_max_rel_dt", "max rel dt", ".1e")]
+COLUMNS = [
+    ("tree", "tree", "s"),
+    ("triangles", "triangles", "d"),
+    ("bvh_bytes", "BVH bytes", "d"),
+    ("tri_v_bytes", "tri_v bytes", "d"),
+    ("camera_rays_per_s", "camera rays/s", ".3g"),
+    ("bounce_rays_per_s", "bounce rays/s", ".3g"),
+    ("render_b1_rays_per_s", "B=1 render rays/s", ".3g"),
+    ("camera_rays_per_cpu_s", "camera rays/cpu-s", ".3g"),
+    ("bounce_rays_per_cpu_s", "bounce rays/cpu-s", ".3g"),
+    ("camera_nodes_per_ray", "nodes/ray cam", ".1f"),
+    ("camera_tris_per_ray", "tris/ray cam", ".1f"),
+    ("bounce_nodes_per_ray", "nodes/ray bounce", ".1f"),
+    ("bounce_tris_per_ray", "tris/ray bounce", ".1f"),
+    ("x_camera_s", "x cam", ".2f"),
+    ("x_bounce_s", "x bounce", ".2f"),
+    ("x_render_b1_s", "x render", ".2f"),
+    ("x_camera_cpu_s", "x cam cpu", ".2f"),
+    ("x_bounce_cpu_s", "x bounce cpu", ".2f"),
+    ("x_render_b1_cpu_s", "x render cpu", ".2f"),
+    ("camera_same_triangle", "same tri cam", ".5f"),
+    ("bounce_same_triangle", "same tri bounce", ".5f"),
+    ("bounce_max_rel_dt", "max rel dt", ".1e"),
+]
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, baseline=None) -> dict:
@@ -207,8 +239,10 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, b
     )
     results = {"traversal": compare(settings, device, Path(baseline).resolve() if baseline else None)}
     report = run_report("traversal", settings, variant, notes, started, load_start, device, results)
-    title = (f"# invrender bench traversal ({settings.mode}; {settings.width}x{settings.height}, "
-             f"{settings.spp} spp, room view {settings.view}; {report['seconds']:.0f} s)")
+    title = (
+        f"# invrender bench traversal ({settings.mode}; {settings.width}x{settings.height}, "
+        f"{settings.spp} spp, room view {settings.view}; {report['seconds']:.0f} s)"
+    )
     columns = [c for c in COLUMNS if any(c[0] in row for row in results["traversal"])]
     write_report(out, "traversal", title, report, {"traversal": ("Closest-hit traversal", columns)}, ("traversal",))
     return report
