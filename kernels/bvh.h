@@ -27,16 +27,14 @@ typedef struct {
  * the sign of the direction, not by min/max, so empty lanes (+inf..-inf) are always missed.
  * The far distance is widened by 2 gamma(3) (Ize 2013) so float rounding never drops a box the
  * ray touches. Comparisons with ?: rather than fmin/fmax/select: PoCL calls those out of line. */
-inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r, float tmax)
+inline float8 lane_entry(global const float8* b, const Ray* r, int3 near, float tmax)
 {
-    global const float8* b = bounds + 6 * node;
-    int sx = r->inv_d.x < 0.0f, sy = r->inv_d.y < 0.0f, sz = r->inv_d.z < 0.0f;
-    float8 tnx = (b[0 + 3 * sx] - r->o.x) * r->inv_d.x;
-    float8 tny = (b[1 + 3 * sy] - r->o.y) * r->inv_d.y;
-    float8 tnz = (b[2 + 3 * sz] - r->o.z) * r->inv_d.z;
-    float8 tfx = (b[3 - 3 * sx] - r->o.x) * r->inv_d.x;
-    float8 tfy = (b[4 - 3 * sy] - r->o.y) * r->inv_d.y;
-    float8 tfz = (b[5 - 3 * sz] - r->o.z) * r->inv_d.z;
+    float8 tnx = (b[near.x] - r->o.x) * r->inv_d.x;
+    float8 tny = (b[near.y] - r->o.y) * r->inv_d.y;
+    float8 tnz = (b[near.z] - r->o.z) * r->inv_d.z;
+    float8 tfx = (b[3 - near.x] - r->o.x) * r->inv_d.x;
+    float8 tfy = (b[5 - near.y] - r->o.y) * r->inv_d.y;
+    float8 tfz = (b[7 - near.z] - r->o.z) * r->inv_d.z;
     float8 tnear = tnx > tny ? tnx : tny;
     tnear = tnear > tnz ? tnear : tnz;
     tnear = tnear > 0.0f ? tnear : (float8)(0.0f);
@@ -46,14 +44,29 @@ inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r
     return tnear <= tfar ? tnear : (float8)(INFINITY);
 }
 
-/* Bit i set where lane i of a comparison result (-1 / 0) is true. */
-inline uint lane_mask(int8 m)
+/* Rows of the near planes: min (0, 1, 2) where the direction is positive, max (3, 4, 5) else;
+ * the far plane of axis k is then row 2 k + 3 - near. */
+inline int3 near_rows(const Ray* r)
 {
-    int8 bits = m & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    return (int3)(r->inv_d.x < 0.0f ? 3 : 0, r->inv_d.y < 0.0f ? 4 : 1, r->inv_d.z < 0.0f ? 5 : 2);
+}
+
+inline float8 bvh_lane_entry(global const float8* bounds, int node, const Ray* r, float tmax)
+{
+    return lane_entry(bounds + 6 * node, r, near_rows(r), tmax);
+}
+
+/* The bits of the lanes where a comparison result (-1 / 0) is true, or-ed together. */
+inline uint lane_mask_bits(int8 m, int8 bit)
+{
+    int8 bits = m & bit;
     int4 a = bits.lo | bits.hi;
     int2 b = a.lo | a.hi;
     return (uint)(b.x | b.y);
 }
+
+/* Bit i set where lane i of a comparison result is true. */
+inline uint lane_mask(int8 m) { return lane_mask_bits(m, (int8)(1, 2, 4, 8, 16, 32, 64, 128)); }
 
 /* Index of the lowest set bit of a nonzero mask: the exponent of the float it converts to,
  * exactly (a power of two), where OpenCL 1.2 has no ctz and PoCL calls clz out of line. */
@@ -112,8 +125,10 @@ inline void intersect_leaf(global const float8* L, int n, const Ray* r, int skip
     int8 zero = (U.v == 0.0f) | (V.v == 0.0f) | (W.v == 0.0f);
     int8 outside = ((U.v < 0.0f) | (V.v < 0.0f) | (W.v < 0.0f)) & ((U.v > 0.0f) | (V.v > 0.0f) | (W.v > 0.0f));
     int8 live = (int8)(0, 1, 2, 3, 4, 5, 6, 7) < n;
-    uint candidates = lane_mask(live & (zero | (~outside & (det.v != 0.0f) & (sT.v > 0.0f))));
-    uint edge = lane_mask(zero);
+    /* candidates in bits 0-7, which of them have an edge function 0 in bits 8-15: one reduction */
+    int8 bit = (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int8 candidate = live & (zero | (~outside & (det.v != 0.0f) & (sT.v > 0.0f)));
+    uint lanes = lane_mask_bits(candidate, bit | bit << 8 & zero), candidates = lanes & 255u, edge = lanes >> 8;
     LanesI slots = {as_int8(L[9])};
     for (; candidates; candidates &= candidates - 1) {
         int i = lowest_lane(candidates);
@@ -154,24 +169,37 @@ inline Hit bvh_closest_hit(const SceneData* s, const Ray* r, float tmax, int ski
     int stack[BVH_STACK_SIZE];
     float stack_t[BVH_STACK_SIZE];
     int top = 0, node = 0;
+    int3 near = near_rows(r);
     for (;;) {
 #ifdef BVH_STATS
         ++hit.nodes;
 #endif
-        float8 entry = bvh_lane_entry(s->bvh_bounds, node, r, hit.t);
+        float8 entry = lane_entry(s->bvh_bounds + 6 * node, r, near, hit.t);
         int8 child = s->bvh_children[2 * node], count = s->bvh_children[2 * node + 1];
-        uint lanes = lane_mask(entry <= hit.t);
+        /* one reduction for both masks: leaves hit in bits 0-7, inner lanes hit in bits 8-15 */
+        int8 bit = (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+        bit = count > 0 ? bit : bit << 8;
+        uint lanes = lane_mask_bits(entry <= hit.t & count >= 0, bit);
         LanesF e = {entry};
         LanesI c = {child}, n = {count};
-        for (uint leaves = lanes & lane_mask(count > 0); leaves; leaves &= leaves - 1) {
+        for (uint leaves = lanes & 255u; leaves; leaves &= leaves - 1) {
             int i = lowest_lane(leaves);
 #ifdef BVH_STATS
             hit.tris += n.s[i];
 #endif
             intersect_leaf(s->bvh_leaves + 10 * c.s[i], n.s[i], r, skip, &hit);
         }
+        uint inner = lanes >> 8;
+        if (inner && !(inner & (inner - 1))) { /* one child: no push and pop */
+            int i = lowest_lane(inner);
+            if (e.s[i] <= hit.t) {
+                node = c.s[i];
+                continue;
+            }
+            inner = 0;
+        }
         int first = top;
-        for (uint inner = lanes & lane_mask(count == 0); inner; inner &= inner - 1) {
+        for (; inner; inner &= inner - 1) {
             int i = lowest_lane(inner);
             float ti = e.s[i];
             if (top >= BVH_STACK_SIZE)

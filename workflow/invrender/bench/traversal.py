@@ -164,16 +164,17 @@ def _probe_process(tree: Path, triangles: int, settings: Settings, device, hits_
 
 
 def _same_hits(a, b) -> dict:
-    """How often two trees found the same triangle, and the largest relative t difference there."""
-    out = {}
+    """Rays for which two trees found different triangles (a ray one tree has and the other has
+    not counts too), and the largest relative difference in t where they found the same."""
+    out, rel = {}, [0.0]
     for key in ("camera", "bounce"):
         ta, tb = a[f"{key}_tri"], b[f"{key}_tri"]
         n = min(len(ta), len(tb))
         same = ta[:n] == tb[:n]
+        out[f"{key}_rays_differ"] = int((~same).sum()) + max(len(ta), len(tb)) - n
         hit = same & (ta[:n] >= 0)
-        rel = np.abs(a[f"{key}_t"][:n][hit] - b[f"{key}_t"][:n][hit]) / a[f"{key}_t"][:n][hit]
-        out[f"{key}_same_triangle"] = float(same.mean()) if n == len(ta) == len(tb) else 0.0
-        out[f"{key}_max_rel_dt"] = float(rel.max()) if rel.size else 0.0
+        rel += list(np.abs(a[f"{key}_t"][:n][hit] - b[f"{key}_t"][:n][hit]) / a[f"{key}_t"][:n][hit])
+    out["max_rel_dt"] = float(np.max(rel))
     return out
 
 
@@ -227,9 +228,9 @@ COLUMNS = [
     ("x_camera_cpu_s", "x cam cpu", ".2f"),
     ("x_bounce_cpu_s", "x bounce cpu", ".2f"),
     ("x_render_b1_cpu_s", "x render cpu", ".2f"),
-    ("camera_same_triangle", "same tri cam", ".5f"),
-    ("bounce_same_triangle", "same tri bounce", ".5f"),
-    ("bounce_max_rel_dt", "max rel dt", ".1e"),
+    ("camera_rays_differ", "rays differ cam", "d"),
+    ("bounce_rays_differ", "rays differ bounce", "d"),
+    ("max_rel_dt", "max rel dt", ".1e"),
 ]
 
 
