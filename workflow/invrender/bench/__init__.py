@@ -7,6 +7,8 @@
   Blender's own interpreter; docs/export.md, "Blender").
 - ``export``: what the USD export loses: round trip, standard view, GGX in Mitsuba 3 (``export.py``;
   docs/export.md).
+- ``traversal``: closest-hit throughput of the BVH alone, on the room and the room at ~214 k
+  triangles, beside a B = 1 render of ours and Mitsuba's (``traversal.py``; docs/benchmarks.md).
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
 
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 import importlib
 
-BENCHMARKS = ("render", "gradients", "export", "milo")  # each a module here with run(quick, out, device)
+BENCHMARKS = ("render", "gradients", "export", "milo", "traversal")  # each a module here with run(quick, out, device)
 OPTIONS = {"milo": ("config", "iterations", "ablation", "work")}  # what only some of them take
 
 

@@ -3,14 +3,16 @@
 On the benchmark room (view 2) as it is and subdivided to ~214 k triangles: camera rays (jittered,
 ``spp`` per pixel) and one cosine-sampled bounce from each hit, as a B = 1 render traces them,
 are traced by kernels/traversal.cl's ``closest_hits`` without shading; rays/s = rays / median
-wall time of a launch. Beside it: nodes and triangles visited per ray (a ``-D BVH_STATS`` build)
-and a whole B = 1 render (closest hits only, as bench render's "bare" one-bounce row).
+wall time of a launch (and per CPU second: less sensitive to other jobs). Beside it: nodes and
+triangles visited per ray (a ``-D BVH_STATS`` build), and whole B = 1 renders of ours (closest
+hits only, as bench render's "bare" one-bounce row) and of Mitsuba 3 (llvm_ad_rgb), interleaved.
 
-Each size is measured in its own process. ``python -m invrender.bench.traversal --baseline DIR``
-alternates those processes between this source tree and another one (DIR holds its
-``workflow/`` and ``kernels/``; this file and traversal.cl are copied in where missing), round by
-round (A B, B A, ...), since the machine is shared, and checks that both trees find the same
-triangle at the same distance for every ray.
+Each size is measured in its own process. ``python -m invrender.bench.traversal run --baseline
+DIR`` alternates those processes between this source tree and another one (DIR holds its
+``workflow/`` and ``kernels/``; this file and traversal.cl are copied into it, so that both are
+measured the same way), round by round (A B, B A, ...) since the machine is shared, gives the
+speed-ups as medians of the per-round ratios, and counts the rays for which the two trees found
+different triangles or distances.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .harness import clock, median, quiet_pyopencl, room_scene, run_report, start_run, write_report
+from .harness import choose_variant, clock, median, quiet_pyopencl, room_scene, run_report, start_run, write_report
 
 MARK = "TRAVERSAL "
 TREE = Path(__file__).resolve().parents[3]  # the source tree this file belongs to
@@ -43,10 +45,11 @@ class Settings:
     repeats: int = 7  # launches timed per process
     rounds: int = 3  # processes per size and tree
     view: int = 2
+    mitsuba: bool = True  # Mitsuba's B = 1 render beside ours (llvm_ad_rgb only)
 
 
 FULL = Settings("full")
-QUICK = Settings("quick", sizes=(0, 20_000), width=64, height=48, spp=1, repeats=2, rounds=1)
+QUICK = Settings("quick", sizes=(0,), width=64, height=48, spp=1, repeats=2, rounds=1, mitsuba=False)
 
 
 def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> dict:
@@ -58,7 +61,7 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
     from ..render.program import build_program
     from ..render.scene_buffers import HostScene, pack_cameras
     from ..scene.types import Scene
-    from .render import InvrenderRunner, subdivide_mesh, subdivisions_for
+    from .render import InvrenderRunner, MitsubaRunner, subdivide_mesh, subdivisions_for
 
     base, _ = room_scene(settings.width, settings.height)
     n = subdivisions_for(len(base.mesh.faces), triangles) if triangles else 1
@@ -128,12 +131,22 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
     except cl.Error:
         pass  # a tree whose bvh.h does not count
 
+    # Whole B = 1 renders, closest hits only (2 rays per sample), interleaved with Mitsuba's
+    # path tracer at max_depth 2 (3 rays per sample: camera, emitter sample's shadow ray, BSDF ray).
     bare = Features.only(max_bounces=1, emission=True, environment=True, window=True)
-    render = InvrenderRunner(scene, camera, bare, device, host=host)
-    render.warm_up()
-    times = np.array([clock(render.render, settings.spp)[1:] for _ in range(settings.repeats)])
-    result["render_b1_rays_per_s"] = 2 * count / median(times[:, 0])
-    result["render_b1_rays_per_cpu_s"] = 2 * count / median(times[:, 1])
+    runners = [("render_b1", InvrenderRunner(scene, camera, bare, device, host=host), 2)]
+    if settings.mitsuba and choose_variant()[0] == "llvm_ad_rgb":
+        runners.append(("mitsuba_b1", MitsubaRunner(scene, camera, 1, "llvm_ad_rgb"), 3))
+    times = {name: [] for name, _, _ in runners}
+    for name, runner, _ in runners:
+        runner.warm_up()
+    for rep in range(settings.repeats):
+        for name, runner, _ in runners if rep % 2 == 0 else runners[::-1]:
+            times[name].append(clock(runner.render, settings.spp)[1:])
+    for name, _, rays in runners:
+        t = np.array(times[name])
+        result[f"{name}_rays_per_s"] = rays * count / median(t[:, 0])
+        result[f"{name}_rays_per_cpu_s"] = rays * count / median(t[:, 1])
     if hits_path:
         tri = lambda h: np.where(h[:, 3].view(np.int32) < 0, -1, host.tri_id[np.maximum(h[:, 3].view(np.int32), 0)])
         np.savez(hits_path, camera_tri=tri(h1), camera_t=h1[:, 0], bounce_tri=tri(h2), bounce_t=h2[:, 0])
@@ -183,8 +196,7 @@ def compare(settings: Settings, device=None, baseline: Path | None = None) -> li
     trees = [("this", TREE)]
     if baseline:
         for name in ("kernels/traversal.cl", "workflow/invrender/bench/traversal.py"):
-            if not (baseline / name).exists():
-                shutil.copy(TREE / name, baseline / name)
+            shutil.copy(TREE / name, baseline / name)  # the same measurement in both trees
         trees.append(("baseline", baseline))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -192,7 +204,9 @@ def compare(settings: Settings, device=None, baseline: Path | None = None) -> li
             runs = {name: [] for name, _ in trees}
             for r in range(settings.rounds):
                 for name, tree in trees if r % 2 == 0 else trees[::-1]:
-                    runs[name].append(_probe_process(tree, size, settings, device, Path(tmp) / f"{name}.npz"))
+                    # Mitsuba once, beside this tree
+                    tree_settings = settings if name == "this" else replace(settings, mitsuba=False)
+                    runs[name].append(_probe_process(tree, size, tree_settings, device, Path(tmp) / f"{name}.npz"))
             for name, _ in trees:
                 row = dict(runs[name][0], tree=name, rounds=len(runs[name]))
                 for key in (k for k in row if k.endswith("_s")):
@@ -216,6 +230,7 @@ COLUMNS = [
     ("camera_rays_per_s", "camera rays/s", ".3g"),
     ("bounce_rays_per_s", "bounce rays/s", ".3g"),
     ("render_b1_rays_per_s", "B=1 render rays/s", ".3g"),
+    ("mitsuba_b1_rays_per_s", "mitsuba B=1 rays/s", ".3g"),
     ("camera_rays_per_cpu_s", "camera rays/cpu-s", ".3g"),
     ("bounce_rays_per_cpu_s", "bounce rays/cpu-s", ".3g"),
     ("camera_nodes_per_ray", "nodes/ray cam", ".1f"),
