@@ -107,6 +107,9 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
     keep = np.any(d2 != 0, axis=1)
     o2, d2 = o2[keep], d2[keep]
     h2, t2 = trace(program, o2, d2)
+    # What sorting the bounce rays would give a wavefront renderer (the sort itself not timed).
+    order = direction_order(o2, d2)
+    _, t2_sorted = trace(program, o2[order], d2[order])
 
     result = {
         "triangles": int(len(scene.mesh.faces)),
@@ -118,7 +121,7 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
             getattr(host, k).nbytes for k in ("bvh_bounds", "bvh_children", "bvh_leaves") if hasattr(host, k)
         ),
     }
-    for key, rays, times in (("camera", count, t1), ("bounce", len(o2), t2)):
+    for key, rays, times in (("camera", count, t1), ("bounce", len(o2), t2), ("bounce_sorted", len(o2), t2_sorted)):
         result[f"{key}_rays"] = rays
         result[f"{key}_rays_per_s"] = rays / median(times[:, 0])
         result[f"{key}_rays_per_cpu_s"] = rays / median(times[:, 1])
@@ -151,6 +154,19 @@ def probe(triangles: int, settings: Settings, device=None, hits_path=None) -> di
         tri = lambda h: np.where(h[:, 3].view(np.int32) < 0, -1, host.tri_id[np.maximum(h[:, 3].view(np.int32), 0)])
         np.savez(hits_path, camera_tri=tri(h1), camera_t=h1[:, 0], bounce_tri=tri(h2), bounce_t=h2[:, 0])
     return result
+
+
+def direction_order(origin, direction, bits: int = 10) -> np.ndarray:
+    """Rays grouped by direction octant, then along a Morton curve of their origins (bits per
+    axis), so that neighbours in a launch traverse the same nodes."""
+    octant = ((direction[:, :3] < 0) * np.array([1, 2, 4])).sum(1).astype(np.uint64)
+    p = origin[:, :3].astype(np.float64)
+    cell = ((p - p.min(0)) / np.maximum(np.ptp(p, 0), 1e-30) * (2**bits - 1)).astype(np.uint64)
+    morton = np.zeros(len(p), np.uint64)
+    for bit in range(bits):
+        for axis in range(3):
+            morton |= ((cell[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(octant << np.uint64(3 * bits) | morton, kind="stable")
 
 
 def _probe_process(tree: Path, triangles: int, settings: Settings, device, hits_path) -> dict:
@@ -229,6 +245,7 @@ COLUMNS = [
     ("tri_v_bytes", "tri_v bytes", "d"),
     ("camera_rays_per_s", "camera rays/s", ".3g"),
     ("bounce_rays_per_s", "bounce rays/s", ".3g"),
+    ("bounce_sorted_rays_per_s", "bounce sorted rays/s", ".3g"),
     ("render_b1_rays_per_s", "B=1 render rays/s", ".3g"),
     ("mitsuba_b1_rays_per_s", "mitsuba B=1 rays/s", ".3g"),
     ("camera_rays_per_cpu_s", "camera rays/cpu-s", ".3g"),
