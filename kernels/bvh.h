@@ -3,8 +3,10 @@
  * One ray tests eight child boxes at once with float8: on CPUs (PoCL) that is the SIMD that
  * pays, since divergent rays are not vectorised across work-items; on GPUs it is eight
  * independent slab tests per work-item. Node layout: bounds rows (min x, min y, min z, max x,
- * max y, max z) x 8 lanes; children rows (child node or first leaf slot, count), count 0 =
- * internal node, > 0 = leaf, -1 = empty lane (whose box is +inf..-inf and never hit). */
+ * max y, max z) x 8 lanes; children rows (child node, or a leaf's block in bvh_leaves, count),
+ * count 0 = internal node, 1..8 = leaf, -1 = empty lane (whose box is +inf..-inf and never hit).
+ * A leaf block holds its triangles as 8 lanes too (intersect_leaf). The emitter BVH (lights.h)
+ * has the same nodes, but a leaf lane there holds its first slot in em_v. */
 #ifndef INVRENDER_BVH_H
 #define INVRENDER_BVH_H
 
@@ -82,6 +84,7 @@ typedef union {
     int s[8];
 } LanesI;
 
+/* Lane i of a vector (lights.h's all-hits traversal of the emitter BVH). */
 inline float lane(float8 v, int i)
 {
     switch (i) {
@@ -100,6 +103,7 @@ inline int lane_int(int8 v, int i)
 
 inline float3 tri_vertex(global const float4* v, int slot, int k) { return v[3 * slot + k].xyz; }
 
+/* |v| by masking the sign bits: fabs's bits, without PoCL's out-of-line call. */
 inline float8 abs8(float8 v) { return as_float8(as_int8(v) & (int8)(0x7fffffff)); }
 
 /* The up to 8 triangles of leaf block L (rows v0 xyz, v1 xyz, v2 xyz, slot) against r at once:
