@@ -25,20 +25,22 @@ inline float3 rotate_to_z(float3 v, int kz)
     return kz == 2 ? v : (kz == 0 ? v.yzx : v.zxy);
 }
 
+/* |v| and the sign bits of v by masking: the same bits as fabs and copysign, which PoCL calls
+ * out of line (once per ray, on every bounce). */
+inline float3 abs3(float3 v) { return as_float3(as_int3(v) & (int3)(0x7fffffff)); }
+
 inline Ray make_ray(float3 o, float3 d)
 {
     Ray r;
     r.o = o;
     r.d = d;
-    float3 ad = fabs(d);
+    float3 ad = abs3(d);
     r.kz = (ad.x > ad.y) ? (ad.x > ad.z ? 0 : 2) : (ad.y > ad.z ? 1 : 2);
     float3 dr = rotate_to_z(d, r.kz);
     r.shear = (float3)(dr.x / dr.z, dr.y / dr.z, 1.0f / dr.z);
     const float tiny = 1e-20f;
-    float3 dd = (float3)(fabs(d.x) < tiny ? copysign(tiny, d.x) : d.x,
-                         fabs(d.y) < tiny ? copysign(tiny, d.y) : d.y,
-                         fabs(d.z) < tiny ? copysign(tiny, d.z) : d.z);
-    r.inv_d = 1.0f / dd;
+    float3 signed_tiny = as_float3(as_int3((float3)(tiny)) | (as_int3(d) & (int3)(INT_MIN)));
+    r.inv_d = 1.0f / (ad < tiny ? signed_tiny : d);
     return r;
 }
 

@@ -16,7 +16,8 @@
     BUFFER(int, tri_instance) NEXT    /* leaf slot -> instance id */                            \
     BUFFER(uchar, tri_one_sided) NEXT /* leaf slot -> 1: emits on its front side only */        \
     BUFFER(float8, bvh_bounds) NEXT   /* 6 rows per node: min xyz, max xyz over 8 lanes */      \
-    BUFFER(int8, bvh_children) NEXT   /* 2 rows per node: child/first slot, count */            \
+    BUFFER(int8, bvh_children) NEXT   /* 2 rows per node: child node/leaf block, count */       \
+    BUFFER(float8, bvh_leaves) NEXT   /* 10 rows per leaf: v0 xyz, v1 xyz, v2 xyz, slot */      \
     BUFFER(float4, material) NEXT     /* 3 float4 per texel (Material in common.h) */           \
     VALUE(int, atlas_w) NEXT                                                                     \
     VALUE(int, atlas_h) NEXT                                                                     \
@@ -29,7 +30,7 @@
     BUFFER(float, em_pdf_area) NEXT   /* P(t) / area(t) */                                      \
     VALUE(int, num_emitters) NEXT                                                                \
     BUFFER(float8, em_bounds) NEXT    /* the emitter BVH, laid out as bvh_bounds */             \
-    BUFFER(int8, em_children) NEXT    /* and as bvh_children */                                 \
+    BUFFER(int8, em_children) NEXT    /* and as bvh_children, but child/first slot, count */    \
     BUFFER(uchar, em_one_sided) NEXT  /* per emitting triangle, as tri_one_sided */             \
     BUFFER(int, em_slot) NEXT         /* per emitting triangle: its slot in tri_v */            \
     BUFFER(float, tri_light_pdf) NEXT /* per slot of tri_v: P(t) / area(t), or 0 */             \

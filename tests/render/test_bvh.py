@@ -10,6 +10,7 @@ from invrender.render.bvh import (
     _closest_hit_reference,
     _intersect_mt,
     build_bvh,
+    leaf_blocks,
     triangle_vertices,
     valid_triangle_mask,
 )
@@ -333,6 +334,42 @@ def test_sah_cost_prefers_a_real_tree():
     assert np.isfinite(cost) and cost > 1.0
     # A tree that tests every triangle would cost ~ the number of triangles.
     assert cost < 0.05 * len(v[0])
+
+
+def test_leaf_blocks_hold_each_leafs_triangles_in_slot_order():
+    """The kernel's layout: a leaf lane's row 0 names its block, the block's columns are the
+    leaf's triangles (vertex coordinates, slot) in slot order, unused columns 0 with slot -1."""
+    v = soup(500, seed=4)
+    bvh = build_bvh(*v)
+    children, blocks = leaf_blocks(bvh, *v)
+    count = bvh.children[:, 1]
+    leaf = count > 0
+    assert np.array_equal(children[:, 1], count)
+    assert np.array_equal(children[:, 0][~leaf], bvh.children[:, 0][~leaf])
+    block, first, n = children[:, 0][leaf], bvh.children[:, 0][leaf], count[leaf]
+    assert blocks.shape == (leaf.sum(), 10, W) and np.array_equal(np.sort(block), np.arange(len(blocks)))
+    assert (np.diff(first[np.argsort(block)]) > 0).all()  # blocks lie in slot order
+    slots = blocks[:, 9].view(np.int32)
+    for b, f, k in zip(block, first, n):
+        assert list(slots[b]) == list(range(f, f + k)) + [-1] * (W - k)
+        for j, vertex in enumerate(v):
+            np.testing.assert_array_equal(blocks[b, 3 * j : 3 * j + 3, :k], vertex[bvh.tri_order[f : f + k]].T)
+            assert (blocks[b, 3 * j : 3 * j + 3, k:] == 0).all()
+
+
+def test_min_leaf():
+    """Every subtree of at most min_leaf triangles is one leaf: an inner lane holds more."""
+    v = grid(20, z_wave=1.0)
+    for min_leaf in (1, 4, 8):
+        bvh = build_bvh(*v, min_leaf=min_leaf)
+        check_structure(bvh, *v)
+        first, count = bvh.children[:, 0], bvh.children[:, 1]
+        below = np.zeros(bvh.n_nodes, np.int64)
+        for node in range(bvh.n_nodes - 1, -1, -1):  # children come after their parents
+            below[node] = count[node][count[node] > 0].sum() + below[first[node][count[node] == 0]].sum()
+        assert (below[first[count == 0]] > min_leaf).all(), min_leaf
+    with pytest.raises(ValueError):
+        build_bvh(*v, min_leaf=9)
 
 
 def test_triangle_vertices():

@@ -48,7 +48,7 @@ def expected(args: tuple[SceneArg, ...]) -> list[tuple[str, str, int]]:
 
 
 def test_every_entry_kernel_takes_the_scene_arguments_the_host_reads_from_the_header():
-    assert len(SCENE_ARGS) == 25 and SCENE_ARGS[0] == SceneArg("tri_v", "float4", True)
+    assert len(SCENE_ARGS) == 26 and SCENE_ARGS[0] == SceneArg("tri_v", "float4", True)
     for entry, kernels in ENTRIES.items():
         program = built(entry)
         for name in kernels:

@@ -26,6 +26,12 @@ def unit(v):
 
 def brute_force(v0, v1, v2, o, d):
     """Closest hit (t, triangle) by Moeller-Trumbore in float64 over every triangle."""
+    t = hit_distances(v0, v1, v2, o, d)
+    return t.min(1), np.where(np.isfinite(t.min(1)), t.argmin(1), -1)
+
+
+def hit_distances(v0, v1, v2, o, d):
+    """(rays, triangles): t of every hit by Moeller-Trumbore in float64, inf where missed."""
     e1, e2 = v1 - v0, v2 - v0
     p = np.cross(d[:, None], e2[None])
     det = np.einsum("tc,rtc->rt", e1, p)
@@ -35,8 +41,7 @@ def brute_force(v0, v1, v2, o, d):
     q = np.cross(s, e1[None])
     v = np.einsum("rc,rtc->rt", d, q) * inv
     t = np.einsum("tc,rtc->rt", e2, q) * inv
-    t = np.where((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0), t, np.inf)
-    return t.min(1), np.where(np.isfinite(t.min(1)), t.argmin(1), -1)
+    return np.where((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0), t, np.inf)
 
 
 def test_closest_hits_match_brute_force():
@@ -127,3 +132,44 @@ def test_no_self_intersection_from_cm_to_km(scale, offset):
     assert np.all(inside[:, 3] >= 0)
     # the far side, never the surface just left: at least a grazing chord's length away
     assert np.all(inside[:, 0] > 1e-4 * scale), inside[:, 0].min()
+
+
+def test_the_triangle_a_ray_leaves_is_skipped_and_no_other():
+    """bvh_closest_hit(..., skip): rays from a point inside triangle k, skipping k's leaf slot (as
+    the integrator does), find the closest of the other triangles (the leaf test of 8 triangles
+    at once must drop exactly that lane). Through kernels/traversal.cl, which takes the skip."""
+    import pyopencl as cl
+
+    from invrender.render.device import context_and_queue
+    from invrender.render.program import build_program
+    from invrender.render.scene_buffers import HostScene
+
+    rng = np.random.default_rng(5)
+    centers = rng.uniform(-1, 1, (400, 3))
+    p32 = (centers[:, None] + rng.normal(scale=0.2, size=(400, 3, 3))).astype(np.float32)
+    scene = scene_of(p32.reshape(-1, 3), np.arange(1200).reshape(-1, 3))
+    host = HostScene.pack(scene.mesh, scene.maps)
+    context, queue = context_and_queue(None)
+    args = host.upload(context, 0.25, 0.25)
+    tri = rng.integers(0, 400, 4000)
+    slot = np.argsort(host.tri_id)[tri]  # leaf slot of each ray's own triangle
+    v = p32.astype(np.float64)
+    o = np.einsum("rk,rkc->rc", rng.dirichlet([1, 1, 1], 4000), v[tri]).astype(np.float32)
+    d = unit(rng.normal(size=(4000, 3))).astype(np.float32)
+    origin = np.zeros((4000, 4), np.float32)
+    origin[:, :3], origin[:, 3] = o, slot.astype(np.int32).view(np.float32)
+    direction = np.zeros((4000, 4), np.float32)
+    direction[:, :3] = d
+    out = np.zeros((4000, 4), np.float32)
+    mf = cl.mem_flags
+    bufs = [cl.Buffer(context, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a) for a in (origin, direction, out)]
+    build_program(context, "traversal.cl").closest_hits(queue, (4000,), None, *args, *bufs)
+    cl.enqueue_copy(queue, out, bufs[2])
+    got = np.where(out[:, 3].view(np.int32) < 0, -1, host.tri_id[np.maximum(out[:, 3].view(np.int32), 0)])
+    assert not np.any(got == tri), "a ray hit the triangle it leaves"
+    t = hit_distances(v[:, 0], v[:, 1], v[:, 2], o.astype(np.float64), d.astype(np.float64))
+    t[np.arange(4000), tri] = np.inf
+    expected = np.where(np.isfinite(t.min(1)), t.argmin(1), -1)
+    agree = got == expected
+    assert agree.mean() > 0.999, f"{(~agree).sum()} of 4000 rays disagree"
+    assert (expected >= 0).mean() > 0.3  # the rays do hit other triangles

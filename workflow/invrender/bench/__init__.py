@@ -10,6 +10,8 @@
 - ``scaling``: time and memory against triangles (1 k to 1 M), pixels and spp, with fitted
   exponents and a worked prediction; Mitsuba 3 beside the triangle sweep (``scaling.py``;
   docs/benchmarks.md, "Scaling").
+- ``traversal``: closest-hit throughput of the BVH alone, on the room and the room at ~214 k
+  triangles, beside a B = 1 render of ours and Mitsuba's (``traversal.py``; docs/benchmarks.md).
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
 
@@ -22,7 +24,7 @@ from __future__ import annotations
 
 import importlib
 
-BENCHMARKS = ("render", "gradients", "export", "milo", "scaling")  # each a module here with run(quick, out, device)
+BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal")  # modules here: run(quick, out, device)
 OPTIONS = {"milo": ("config", "iterations", "ablation", "work"), "render": ("sections",)}  # what only some take
 
 

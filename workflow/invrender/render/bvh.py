@@ -11,6 +11,11 @@ Layout for the OpenCL kernel (one ray against the 8 lanes of a node with ``float
                 lane), row 1 = 0 (internal), > 0 (leaf with that many triangles), -1 (empty).
 ``tri_order``   (T,) int32, leaf slot -> original triangle index.
 
+The kernel reads the main BVH with its leaves as blocks (``leaf_blocks``): a leaf lane's row 0 is
+then its block, and block k is (10, 8) float32, rows v0 x y z, v1 x y z, v2 x y z and the leaf
+slots (int32 bits; -1 past the leaf's count), column = triangle of the leaf, so that one ray
+tests a whole leaf with ``float8`` as it tests a node's boxes.
+
 Guarantees: node 0 is the root and is internal; occupied lanes come first in every node (empty
 lanes are a suffix, so a node's lane count is the number of lanes with count != -1); empty lanes
 have min = +inf, max = -inf and row 0 = 0; a lane's box contains (in exact arithmetic) every
@@ -24,11 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["WideBVH", "build_bvh", "triangle_vertices", "valid_triangle_mask"]
+__all__ = ["WideBVH", "build_bvh", "leaf_blocks", "triangle_vertices", "valid_triangle_mask"]
 
 WIDTH = 8
 N_BINS = 12
-MIN_LEAF = 4  # nodes with at most this many triangles are always leaves
+MIN_LEAF = 8  # nodes with at most this many triangles are always leaves (the kernel tests 8 at once)
 MAX_LEAF = 8  # nodes with more than this many triangles are always split
 C_NODE = 1.0  # SAH cost of visiting an internal node, relative to one triangle test
 C_TRI = 1.0
@@ -244,7 +249,7 @@ def _box_area_cm(lo, hi):
     return 2 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])
 
 
-def _build_binary(tlo, thi, n_bins=N_BINS):
+def _build_binary(tlo, thi, n_bins=N_BINS, min_leaf=MIN_LEAF):
     """Level-by-level binned SAH over the triangle boxes ``tlo``/``thi`` (float64).
 
     Returns the tree and ``order`` (positions into the input arrays, leaves contiguous).
@@ -270,7 +275,7 @@ def _build_binary(tlo, thi, n_bins=N_BINS):
         left_parts.append(left)
         nxt_start, nxt_count = empty, empty
 
-        big = cur_count > MIN_LEAF
+        big = cur_count > min_leaf
         if big.any():
             bidx = np.flatnonzero(big)
             Kb = bidx.size
@@ -382,10 +387,11 @@ def _collapse(tree: _BinaryTree):
     return np.concatenate(levels)
 
 
-def build_bvh(v0, v1, v2, n_bins: int = N_BINS) -> WideBVH:
+def build_bvh(v0, v1, v2, n_bins: int = N_BINS, min_leaf: int = MIN_LEAF) -> WideBVH:
     """Build the 8-wide BVH of triangles ``v0``, ``v1``, ``v2`` ((F, 3) each, original order).
 
     Triangles with non-finite vertices or (near-)zero area are left out of ``tri_order``.
+    Subtrees of at most ``min_leaf`` (1..8) triangles are leaves.
     """
     a = np.asarray(v0, dtype=np.float64).reshape(-1, 3)
     b = np.asarray(v1, dtype=np.float64).reshape(-1, 3)
@@ -394,6 +400,8 @@ def build_bvh(v0, v1, v2, n_bins: int = N_BINS) -> WideBVH:
         raise ValueError(f"vertex arrays differ in shape: {a.shape}, {b.shape}, {c.shape}")
     if n_bins < 2:
         raise ValueError("n_bins must be at least 2")
+    if not 1 <= min_leaf <= MAX_LEAF:
+        raise ValueError(f"min_leaf must be 1..{MAX_LEAF}")
     valid = valid_triangle_mask(a, b, c)
     ids = np.flatnonzero(valid)
     if ids.size == 0:
@@ -408,7 +416,7 @@ def build_bvh(v0, v1, v2, n_bins: int = N_BINS) -> WideBVH:
     thi = np.maximum(np.maximum(a, b), c)
     del a, b, c
 
-    tree, order = _build_binary(tlo, thi, n_bins)
+    tree, order = _build_binary(tlo, thi, n_bins, min_leaf)
     lanes = _collapse(tree)
 
     # ---- flatten ------------------------------------------------------------------------
@@ -432,6 +440,30 @@ def build_bvh(v0, v1, v2, n_bins: int = N_BINS) -> WideBVH:
         np.ascontiguousarray(children, dtype=np.int32),
         ids[order].astype(np.int32),
     )
+
+
+def leaf_blocks(bvh: WideBVH, v0, v1, v2) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's layout of ``bvh`` built over ``v0``, ``v1``, ``v2`` (float32, original
+    order): (children, blocks). Each leaf lane's row 0 becomes its block's index, blocks are
+    numbered in slot order (as the triangles lie in memory); unused columns are 0 with slot -1."""
+    children = bvh.children.copy()
+    leaf = children[:, 1, :] > 0
+    first, count = children[:, 0, :][leaf], children[:, 1, :][leaf]
+    by_slot = np.argsort(first, kind="stable")
+    block = np.empty(first.size, np.int32)
+    block[by_slot] = np.arange(first.size, dtype=np.int32)
+    row0 = children[:, 0, :]
+    row0[leaf] = block
+    first, count = first[by_slot], count[by_slot]
+    slots = first[:, None] + np.arange(WIDTH)[None, :]  # (L, 8)
+    live = np.arange(WIDTH)[None, :] < count[:, None]
+    tri = bvh.tri_order[np.where(live, slots, 0)] if bvh.tri_order.size else np.zeros(slots.shape, np.int64)
+    blocks = np.zeros((first.size, 10, WIDTH), np.float32)
+    for k, v in enumerate((v0, v1, v2)):
+        coords = np.asarray(v, np.float32).reshape(-1, 3)[tri]  # (L, 8, 3)
+        blocks[:, 3 * k : 3 * k + 3, :] = np.where(live[:, :, None], coords, 0.0).transpose(0, 2, 1)
+    blocks[:, 9, :] = np.where(live, slots, -1).astype(np.int32).view(np.float32)
+    return children, blocks
 
 
 # --------------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import pyopencl as cl
 
 from ..scene.cubemap import cube_texel_solid_angles
 from ..scene.types import Camera, Maps, Mesh
-from .bvh import WideBVH, build_bvh, triangle_vertices
+from .bvh import WideBVH, build_bvh, leaf_blocks, triangle_vertices
 from .program import KERNEL_DIR
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -221,6 +221,7 @@ class HostScene:
     tri_one_sided: np.ndarray
     bvh_bounds: np.ndarray
     bvh_children: np.ndarray
+    bvh_leaves: np.ndarray
     material: np.ndarray
     atlas_w: int
     atlas_h: int
@@ -260,7 +261,8 @@ class HostScene:
         if importance is not None:
             power = power + surface_power(mesh, np.asarray(importance, np.float64))
         emitters = np.flatnonzero(power > 0)
-        em_bvh = build_bvh(v0[emitters], v1[emitters], v2[emitters]) if len(emitters) else _empty_bvh()
+        # pdf_emitter tests the emitter BVH's triangles one at a time: small leaves.
+        em_bvh = build_bvh(v0[emitters], v1[emitters], v2[emitters], min_leaf=4) if len(emitters) else _empty_bvh()
         em_order = emitters[em_bvh.tri_order]  # emitter-BVH slot -> original triangle
         em_area = 0.5 * np.linalg.norm(np.cross(v1[em_order] - v0[em_order], v2[em_order] - v0[em_order]), axis=1)
         em_pmf = power[em_order] / max(power[em_order].sum(), 1e-300)
@@ -273,6 +275,7 @@ class HostScene:
         tri_light_pdf[slot_of[em_order]] = em_pdf_area
         env_pmf, env_cdf, env_black = environment_distribution(maps.kg)
         h, w = maps.atlas_shape
+        bvh_children, bvh_leaves = leaf_blocks(bvh, v0, v1, v2)
         return cls(
             tri_v=tri_v,
             tri_uv=tri_uv,
@@ -280,7 +283,8 @@ class HostScene:
             tri_instance=instances[order].astype(np.int32),
             tri_one_sided=one_sided[order],
             bvh_bounds=bvh.bounds,
-            bvh_children=bvh.children,
+            bvh_children=bvh_children,
+            bvh_leaves=bvh_leaves,
             material=pack_material(maps),
             atlas_w=w,
             atlas_h=h,
@@ -353,7 +357,16 @@ if _missing:
     raise ImportError(f"kernels/scene_data.h lists {sorted(_missing)}, which HostScene does not pack")
 
 # Arguments that depend on the mesh only: new maps for the same mesh leave them as they are.
-GEOMETRY_ARGS = ("tri_v", "tri_uv", "tri_id", "tri_instance", "tri_one_sided", "bvh_bounds", "bvh_children")
+GEOMETRY_ARGS = (
+    "tri_v",
+    "tri_uv",
+    "tri_id",
+    "tri_instance",
+    "tri_one_sided",
+    "bvh_bounds",
+    "bvh_children",
+    "bvh_leaves",
+)
 
 # Arguments that say how directions are sampled (strategies 3 and 4), built from kg and ke.
 SAMPLING_ARGS = (
