@@ -16,8 +16,11 @@ inline uint4 philox4x32_10(uint4 ctr, uint2 key)
 {
     const uint M0 = 0xD2511F53u, M1 = 0xCD9E8D57u, W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
     for (int round = 0; round < 10; ++round) {
-        uint hi0 = mul_hi(M0, ctr.x), lo0 = M0 * ctr.x;
-        uint hi1 = mul_hi(M1, ctr.z), lo1 = M1 * ctr.z;
+        /* the high words through a 64-bit product, not mul_hi: PoCL calls mul_hi out of line
+         * (15 % of a one-bounce render); the same bits */
+        ulong p0 = (ulong)M0 * ctr.x, p1 = (ulong)M1 * ctr.z;
+        uint hi0 = (uint)(p0 >> 32), lo0 = (uint)p0;
+        uint hi1 = (uint)(p1 >> 32), lo1 = (uint)p1;
         ctr = (uint4)(hi1 ^ ctr.y ^ key.x, lo1, hi0 ^ ctr.w ^ key.y, lo0);
         key += (uint2)(W0, W1);
     }
