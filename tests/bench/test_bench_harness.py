@@ -95,7 +95,7 @@ def test_effects_rows_per_scene(quick_run):
             if row["kind"] == "analysed":
                 assert row["speedup"] == 1.0 and row["efficiency"] == 1.0
                 continue
-            for key in ("mean_rel_diff", "mean_rel_sigma", "pixel_mse_over_noise"):
+            for key in ("speedup_sigma", "mean_rel_diff", "mean_rel_sigma", "pixel_mse_over_noise"):
                 assert math.isfinite(row[key]), (name, switch, key)
             if row["kind"] == "bias":
                 assert row["efficiency"] is None and row["mean_rel_diff"] < 0, (name, switch)

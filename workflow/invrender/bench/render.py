@@ -626,6 +626,7 @@ def _interleaved(runners, spp, repeats, desc):
         stats.append(
             {
                 "wall": median(o["walls"]),
+                "walls": o["walls"],  # per round, in round order: paired ratios between runners
                 "image": np.mean(o["images"], 0),
                 "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
                 "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
@@ -736,6 +737,10 @@ def features_section(scene, camera, settings: Settings, device=None) -> list[dic
                 s["image"], base["image"], s["var_mean"], base["var_mean"], s["mean_var"], base["mean_var"]
             )
             efficiency = (base["var_per_sample"] * base["wall"]) / (s["var_per_sample"] * s["wall"])
+            # The speed-up's noise: the spread of the ratio within each round (renders minutes
+            # apart on a shared machine see different loads; those of one round, less so).
+            log_ratio = np.log(np.asarray(s["walls"]) / np.asarray(base["walls"]))
+            spread = float(np.std(log_ratio, ddof=1) / math.sqrt(len(log_ratio))) if len(log_ratio) > 1 else None
             rows.append(
                 {
                     "section": "features",
@@ -750,6 +755,9 @@ def features_section(scene, camera, settings: Settings, device=None) -> list[dic
                     "repeats": settings.feature_repeats,
                     "t_per_sample_us": 1e6 * s["wall"] / samples,
                     "speedup": s["wall"] / base["wall"],
+                    "speedup_sigma": None
+                    if kind == "analysed" or spread is None
+                    else spread * s["wall"] / base["wall"],
                     "var_per_sample": s["var_per_sample"],
                     # at another image (a dropped term) variance x time compares nothing
                     "efficiency": None if kind == "bias" else efficiency,
@@ -1004,10 +1012,10 @@ TABLES = {
     ),
     "features": (
         "Effects on demand: each switch against the analysed (specialised) kernel, rendered interleaved "
-        "(speed-up = t / t analysed, > 1: the switch costs time; efficiency = 1 / (variance x time) "
-        "relative to the analysed kernel; kind: control = Features.everything, unneeded = an effect the "
-        "analysis compiled out turned on, bias = an effect compiled in dropped, variance = a sampling "
-        "strategy dropped)",
+        "(speed-up = t / t analysed, > 1: the switch costs time, +- 1 sigma from the per-round ratios; "
+        "efficiency = 1 / (variance x time) relative to the analysed kernel; kind: control = "
+        "Features.everything, unneeded = an effect the analysis compiled out turned on, bias = an effect "
+        "compiled in dropped, variance = a sampling strategy dropped)",
         [
             ("scene", "scene", "s"),
             ("switch", "switch", "s"),
@@ -1016,6 +1024,7 @@ TABLES = {
             ("weights", "w_env/w_emit", "s"),
             ("t_per_sample_us", "t/sample [us]", ".3f"),
             ("speedup", "speed-up", ".3f"),
+            ("speedup_sigma", "(+-)", ".3f"),
             ("var_per_sample", "var/sample", ".4g"),
             ("efficiency", "efficiency", ".3f"),
             ("mean_rel_diff", "mean rel diff", "+.2%"),
