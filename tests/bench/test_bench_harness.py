@@ -10,7 +10,7 @@ import pytest
 
 import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
 from invrender.bench.harness import time_at_rmse
-from invrender.bench.render import QUICK, scalar_settings, subdivide_mesh
+from invrender.bench.render import EFFECT_SCENES, MIXTURE, QUICK, scalar_settings, subdivide_mesh
 from invrender.cli import main
 from invrender.synthesize.room import make_room
 
@@ -61,27 +61,57 @@ def test_equal_rmse_rows_for_3_and_10_bounces(quick_run):
         assert row["ref_noise_rmse"] < row["target_rmse"]
         assert math.isfinite(row["mean_rel_diff"])
     assert {(r["bounces"], r["renderer"]) for r in report["curves"]} == {
-        (b, n) for b in (3, 10) for n in ("invrender", "mitsuba")
+        (b, n) for b in (3, 10) for n in ("invrender", MIXTURE, "mitsuba")
     }
     assert len(report["one_time"]) == 4
     settings = QUICK if report["mitsuba_variant"] == "llvm_ad_rgb" else scalar_settings(QUICK)
     assert [row["width"] for row in rows] == [settings.width] * 2
 
 
-def test_bvh_features_and_profile_rows(quick_run):
+def test_bvh_and_profile_rows(quick_run):
     _, report = quick_run
     (bvh,) = report["bvh"]
     assert 15_000 < bvh["triangles"] < 30_000
     for key in ("build_s", "traced_peak_mb", "device_bytes_per_tri", "invrender_bare_rays_per_s"):
         assert _finite_positive(bvh[key]), key
-    assert [row["case"] for row in report["features"]] == ["all-diffuse, no window", "default room"]
-    for row in report["features"]:
-        assert _finite_positive(row["speedup"])
-        assert row["agreement"] in ("agree", "not checked")
-    assert report["features"][0]["features"] == "emission,emitter_sampling"
     cases = [row["case"] for row in report["profile"]]
     assert any(case.startswith("mitsuba") for case in cases)
     assert all(_finite_positive(row["t_per_sample_us"]) for row in report["profile"])
+
+
+def test_effects_rows_per_scene(quick_run):
+    """Every scene has the analysed kernel, the all-features control, the switches the analysis
+    implies, the estimator and roulette; numbers finite; dropped terms only darken the image."""
+    _, report = quick_run
+    rows = report["features"]
+    assert list(dict.fromkeys(row["scene"] for row in rows)) == [name for name, _ in EFFECT_SCENES]
+    by_scene = {name: {row["switch"]: row for row in rows if row["scene"] == name} for name, _ in EFFECT_SCENES}
+    for name, mine in by_scene.items():
+        kinds = [row["kind"] for row in mine.values()]
+        assert kinds[:2] == ["analysed", "control"] and {"estimator", "roulette"} <= set(kinds), (name, kinds)
+        for switch, row in mine.items():
+            for key in ("t_per_sample_us", "speedup", "var_per_sample"):
+                assert _finite_positive(row[key]), (name, switch, key, row[key])
+            if row["kind"] == "analysed":
+                assert row["speedup"] == 1.0 and row["efficiency"] == 1.0
+                continue
+            for key in ("speedup_sigma", "mean_rel_diff", "mean_rel_sigma", "pixel_mse_over_noise"):
+                assert math.isfinite(row[key]), (name, switch, key)
+            if row["kind"] == "bias":
+                assert row["efficiency"] is None and row["mean_rel_diff"] < 0, (name, switch)
+            else:
+                assert _finite_positive(row["efficiency"]) and row["agreement"] in ("agree", "not checked")
+    diffuse, window, glossy = by_scene.values()
+    assert {"specular on", "environment on", "window on", "env_sampling on"} <= set(diffuse)
+    assert "specular on" in window and "specular off" in glossy
+    assert all("environment off (window, env sampling with it)" in scene for scene in (window, glossy))
+    for mine in by_scene.values():
+        analysed = next(iter(mine.values()))
+        assert analysed["features"]["nee"] and analysed["features"]["roulette_depth"] == 3
+        (mixture,) = [row for row in mine.values() if row["kind"] == "estimator"]
+        assert not mixture["features"]["nee"]
+        (off,) = [row for row in mine.values() if row["kind"] == "roulette"]
+        assert off["features"]["roulette_depth"] == 0 and off["bounces"] == 10
 
 
 def test_time_at_rmse_interpolates_log_log_and_extrapolates_as_one_over_sqrt_t():

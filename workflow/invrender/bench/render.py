@@ -26,8 +26,12 @@ is installed). docs/benchmarks.md ("Renderer") has the method, a full run and it
 2. **BVH build** of the room subdivided to ~200 k and ~1 M triangles, in a subprocess per size:
    build time, peak traced allocation (tracemalloc) and peak RSS growth during the build, bytes
    per triangle of the device buffers, and one-bounce render throughput of both renderers.
-3. **Specialised kernels** against the all-features kernel on an all-diffuse room without
-   window or sky and on the default room: time per sample, ratio, image agreement.
+3. **Effects on demand** on three scenes (all-diffuse closed room, the diffuse room with its
+   window, the glossy room): the analysed kernel against the all-features kernel and against
+   each single switch (an effect compiled out turned on, one compiled in dropped, NEE against
+   MILO's mixture, Russian roulette on and off): time and variance per sample, efficiency, and
+   the image difference (the bias a switch introduces). Alone: ``python -m
+   invrender.bench.render features-only [--quick] [--out DIR]``.
 4. **Profile**: where invrender's time and variance go (sampling strategies compiled out,
    mixture weights, one-bounce ray throughput against Mitsuba).
 
@@ -40,9 +44,12 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
+import time
 import warnings
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -136,13 +143,14 @@ def scalar_settings(settings: Settings) -> Settings:
 # ---------------------------------------------------------------------------------------------
 
 
-def diffuse_variant(scene):
+def diffuse_variant(scene, window: bool = False):
     """The room with ks = 0, kw = 0 and kg = 0: Lambertian, no window, no sky (the window quad
-    becomes a black patch of wall)."""
+    becomes a black patch of wall); with `window`, ks = 0 only (window and sky kept)."""
     from ..scene.types import Maps, Scene
 
     m = scene.maps
-    maps = Maps(kd=m.kd, ks=np.zeros_like(m.ks), ka=m.ka, ke=m.ke, kw=np.zeros_like(m.kw), kg=np.zeros_like(m.kg))
+    kw, kg = (m.kw, m.kg) if window else (np.zeros_like(m.kw), np.zeros_like(m.kg))
+    maps = Maps(kd=m.kd, ks=np.zeros_like(m.ks), ka=m.ka, ke=m.ke, kw=kw, kg=kg)
     return Scene(scene.mesh, maps, scene.cameras)
 
 
@@ -579,7 +587,7 @@ def bvh_section(settings: Settings, variant: str, device=None) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------------
-# 3. Specialised kernels against the all-features kernel
+# 3. Effects on demand: the specialised kernel against everything, and each switch on its own
 # ---------------------------------------------------------------------------------------------
 
 
@@ -600,6 +608,7 @@ def _interleaved(runners, spp, repeats, desc):
         stats.append(
             {
                 "wall": median(o["walls"]),
+                "walls": o["walls"],  # per round, in round order: paired ratios between runners
                 "image": np.mean(o["images"], 0),
                 "mean_var": float(np.var(means, ddof=1) / len(means)) if len(means) > 1 else 0.0,
                 "var_mean": float(np.mean(o["variances"]) / len(o["images"])),
@@ -609,46 +618,182 @@ def _interleaved(runners, spp, repeats, desc):
     return stats
 
 
-def features_section(scene, camera, settings: Settings, device=None) -> list[dict]:
-    from ..render.analysis import analyse_scene
+# The three scenes of the effects table: (name, the room -> that scene).
+EFFECT_SCENES = (
+    ("all-diffuse closed room", diffuse_variant),
+    ("diffuse room with window", lambda room: diffuse_variant(room, window=True)),
+    ("glossy room", lambda room: room),
+)
+# Effects the analysis compiled out, turned back on: name -> the flags that switch it on (an
+# effect with the effect it needs: window and env sampling need the environment).
+UNNEEDED_ON = (
+    ("specular", {"specular": True}),
+    ("emission", {"emission": True}),
+    ("emitter_sampling", {"emitter_sampling": True}),
+    ("environment", {"environment": True}),
+    ("window", {"environment": True, "window": True}),
+    ("env_sampling", {"environment": True, "env_sampling": True}),
+    ("one_sided", {"one_sided": True}),
+)
+# Effects compiled in, turned off: (switch, kind, flags, applies). kind "bias": the image loses a
+# term; "variance": a sampling strategy, unbiased, only the noise changes. Emission is dropped only
+# where the sky is left to light the room (else the image is black); the window alone is not,
+# since without it no path reaches the sky of these closed rooms (environment off, with less work).
+COMPILED_IN_OFF = (
+    ("specular off", "bias", {"specular": False}, lambda f: f.specular),
+    (
+        "environment off (window, env sampling with it)",
+        "bias",
+        {"environment": False, "window": False, "env_sampling": False},
+        lambda f: f.environment,
+    ),
+    (
+        "emission off (emitter sampling with it)",
+        "bias",
+        {"emission": False, "emitter_sampling": False},
+        lambda f: f.emission and f.environment,
+    ),
+    ("emitter sampling off", "variance", {"emitter_sampling": False}, lambda f: f.emitter_sampling),
+    ("env sampling off", "variance", {"env_sampling": False}, lambda f: f.env_sampling),
+)
+ROULETTE_BOUNCES, ROULETTE_DEPTH = 10, 3
+
+
+def effect_switches(scene, analysed, device=None) -> list[tuple[str, str, object]]:
+    """(switch, kind, Features) for one scene, the analysed kernel first. Every variant keeps
+    the analysed weights and roulette but for what it changes, so its row measures one switch."""
     from ..render.features import Features
+    from ..render.tuning import choose_strategy_weights
+
+    same = {"w_env": analysed.w_env, "w_emit": analysed.w_emit, "roulette_depth": analysed.roulette_depth}
+    off = ", ".join(k for k, v in asdict(analysed).items() if v is False) or "none"
+    switches = [
+        (f"analysed (compiled out: {off}; rr {analysed.roulette_depth})", "analysed", analysed),
+        ("everything (Features.everything)", "control", replace(Features.everything(analysed.max_bounces), **same)),
+    ]
+    for effect, flags in UNNEEDED_ON:
+        if not getattr(analysed, effect):
+            switches.append((f"{effect} on", "unneeded", replace(analysed, **flags)))
+    for name, kind, flags, applies in COMPILED_IN_OFF:
+        if applies(analysed):
+            switches.append((name, kind, replace(analysed, **flags)))
+    # The estimator: MILO's one-sample mixture with the weights its own pilot picks.
+    mixture, _ = choose_strategy_weights(scene, replace(analysed, nee=not analysed.nee), device)
+    switches.append(("nee " + ("off (MILO mixture)" if analysed.nee else "on"), "estimator", mixture))
+    # Russian roulette at B = 10: the analysed kernel if that is what it is, else both settings.
+    rr_on = replace(analysed, max_bounces=ROULETTE_BOUNCES, roulette_depth=ROULETTE_DEPTH)
+    if rr_on != analysed:
+        switches.append((f"roulette {ROULETTE_DEPTH}, B = {ROULETTE_BOUNCES}", "roulette", rr_on))
+    switches.append((f"roulette off, B = {ROULETTE_BOUNCES}", "roulette", replace(rr_on, roulette_depth=0)))
+    return switches
+
+
+def _switch_verdict(kind: str, check: dict, spp: int) -> str:
+    """verdict(); for a switch that drops a term a difference is what is measured ("biased")."""
+    judged = verdict(check, spp)
+    return "biased" if kind == "bias" and judged == "DIFFER" else judged
+
+
+def features_section(scene, camera, settings: Settings, device=None) -> list[dict]:
+    """Per scene (EFFECT_SCENES): the analysed kernel, the all-features kernel and every single
+    switch (effect_switches), rendered interleaved; time and variance per sample, efficiency
+    1 / (variance x time) and the image difference, all against the analysed kernel."""
+    from ..render.analysis import analyse_scene
+    from ..render.scene_buffers import HostScene
 
     rows = []
-    pixels = camera.width * camera.height
-    for case, variant_scene in (("all-diffuse, no window", diffuse_variant(scene)), ("default room", scene)):
+    samples = camera.width * camera.height * settings.feature_spp
+    judged_spp = settings.feature_spp * settings.feature_repeats
+    for name, make in EFFECT_SCENES:
+        variant_scene = make(scene)
         analysed, _ = analyse_scene(variant_scene, device=device)
-        everything = Features.everything(max_bounces=analysed.max_bounces)
-        special = InvrenderRunner(variant_scene, camera, analysed, device)
-        full = InvrenderRunner(variant_scene, camera, everything, device, host=special.renderer.host)
-        special.warm_up()
-        full.warm_up()
-        a, b = _interleaved((special, full), settings.feature_spp, settings.feature_repeats, f"features: {case}")
-        check = agreement(a["image"], b["image"], a["var_mean"], b["var_mean"], a["mean_var"], b["mean_var"])
-        on = [k for k, v in asdict(analysed).items() if v is True]
-        rows.append(
-            {
-                "section": "features",
-                "case": case,
-                "features": ",".join(on) or "(none)",
-                "bounces": analysed.max_bounces,
-                "spp": settings.feature_spp,
-                "repeats": settings.feature_repeats,
-                "t_per_sample_specialised_us": 1e6 * a["wall"] / (pixels * settings.feature_spp),
-                "t_per_sample_everything_us": 1e6 * b["wall"] / (pixels * settings.feature_spp),
-                "speedup": b["wall"] / a["wall"],
-                "mean_rel_diff": check["mean_rel_diff"],
-                "mean_rel_sigma": check["mean_rel_sigma"],
-                "pixel_mse_over_noise": check["pixel_mse_over_noise"],
-                "agreement": verdict(check, settings.feature_spp * settings.feature_repeats),
-            }
-        )
-        if rows[-1]["agreement"] == "DIFFER":
-            log.error(
-                "features %s: specialised and all-features images differ by %.2f %% (> 1 %%)",
-                case,
-                100 * check["mean_rel_diff"],
+        switches = effect_switches(variant_scene, analysed, device)
+        host = HostScene.pack(variant_scene.mesh, variant_scene.maps)
+        runners = [InvrenderRunner(variant_scene, camera, f, device, host=host) for _, _, f in switches]
+        for runner in runners:
+            runner.warm_up()
+        stats = _interleaved(runners, settings.feature_spp, settings.feature_repeats, f"effects: {name}")
+        base = stats[0]
+        for (switch, kind, features), s in zip(switches, stats):
+            check = agreement(
+                s["image"], base["image"], s["var_mean"], base["var_mean"], s["mean_var"], base["mean_var"]
             )
+            efficiency = (base["var_per_sample"] * base["wall"]) / (s["var_per_sample"] * s["wall"])
+            # The speed-up's noise: the spread of the ratio within each round (renders minutes
+            # apart on a shared machine see different loads; those of one round, less so).
+            log_ratio = np.log(np.asarray(s["walls"]) / np.asarray(base["walls"]))
+            spread = float(np.std(log_ratio, ddof=1) / math.sqrt(len(log_ratio))) if len(log_ratio) > 1 else None
+            rows.append(
+                {
+                    "section": "features",
+                    "scene": name,
+                    "switch": switch,
+                    "kind": kind,
+                    "bounces": features.max_bounces,
+                    "roulette_depth": features.roulette_depth,
+                    "weights": f"{features.w_env:g}/{features.w_emit:g}",
+                    "features": asdict(features),
+                    "spp": settings.feature_spp,
+                    "repeats": settings.feature_repeats,
+                    "t_per_sample_us": 1e6 * s["wall"] / samples,
+                    "speedup": s["wall"] / base["wall"],
+                    "speedup_sigma": None
+                    if kind == "analysed" or spread is None
+                    else spread * s["wall"] / base["wall"],
+                    "var_per_sample": s["var_per_sample"],
+                    # at another image (a dropped term) variance x time compares nothing
+                    "efficiency": None if kind == "bias" else efficiency,
+                    "mean_rel_diff": None if kind == "analysed" else check["mean_rel_diff"],
+                    "mean_rel_sigma": None if kind == "analysed" else check["mean_rel_sigma"],
+                    "pixel_mse_over_noise": None if kind == "analysed" else check["pixel_mse_over_noise"],
+                    "agreement": "-" if kind == "analysed" else _switch_verdict(kind, check, judged_spp),
+                }
+            )
+            if rows[-1]["agreement"] == "DIFFER":
+                log.error(
+                    "effects, %s, %s: the image differs from the analysed kernel's by %.2f %% (> 1 %%, "
+                    "sigma %.3f %%) where only the noise may change",
+                    name,
+                    switch,
+                    100 * check["mean_rel_diff"],
+                    100 * check["mean_rel_sigma"],
+                )
     return rows
+
+
+def effect_notes(rows) -> list[str]:
+    """A note for each switch that should leave the image as it is and did not, or could not be
+    told to within this run's noise."""
+    return [
+        f"effects, {row['scene']}, {row['switch']}: the image differs from the analysed kernel's by "
+        f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
+        + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run")
+        for row in rows
+        if row["kind"] not in ("analysed", "bias") and row["agreement"] not in ("agree", "not checked")
+    ]
+
+
+def run_effects(quick: bool = False, out="docs/benchmarks", device: str | None = None, width=None, height=None):
+    """Only the effects table (`python -m invrender.bench.render features-only`): no Mitsuba, so
+    minutes instead of the whole benchmark's hour. Writes render_features.json, .csv, _table.md."""
+    settings = QUICK if quick else FULL
+    settings = replace(settings, width=width or settings.width, height=height or settings.height)
+    quiet_pyopencl()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    started, load_start = time.time(), os.getloadavg()
+    scene, _ = room_scene(settings.width, settings.height)
+    camera = scene.cameras[settings.view]
+    rows = features_section(scene, camera, settings, device)
+    report = run_report(
+        "render_features", settings, "none", effect_notes(rows), started, load_start, device, {"features": rows}
+    )
+    title = (
+        f"# invrender bench render, effects only ({settings.mode}; {camera.width}x{camera.height}, room view "
+        f"{settings.view}; {settings.feature_spp} spp x {settings.feature_repeats} rounds; {report['seconds']:.0f} s)"
+    )
+    write_report(out, "render_features", title, report, TABLES, ("features",))
+    return report
 
 
 # ---------------------------------------------------------------------------------------------
@@ -848,18 +993,26 @@ TABLES = {
         ],
     ),
     "features": (
-        "Specialised kernels against the all-features kernel (time per sample, median of repeats)",
+        "Effects on demand: each switch against the analysed (specialised) kernel, rendered interleaved "
+        "(speed-up = t / t analysed, > 1: the switch costs time, +- 1 sigma from the per-round ratios; "
+        "efficiency = 1 / (variance x time) relative to the analysed kernel; kind: control = "
+        "Features.everything, unneeded = an effect the analysis compiled out turned on, bias = an effect "
+        "compiled in dropped, variance = a sampling strategy dropped)",
         [
-            ("case", "case", "s"),
-            ("features", "analysed features", "s"),
+            ("scene", "scene", "s"),
+            ("switch", "switch", "s"),
+            ("kind", "kind", "s"),
             ("bounces", "B", "d"),
-            ("t_per_sample_specialised_us", "specialised [us]", ".3f"),
-            ("t_per_sample_everything_us", "everything [us]", ".3f"),
+            ("weights", "w_env/w_emit", "s"),
+            ("t_per_sample_us", "t/sample [us]", ".3f"),
             ("speedup", "speed-up", ".3f"),
-            ("mean_rel_diff", "mean rel diff", "+.3%"),
-            ("mean_rel_sigma", "(1 sigma)", ".3%"),
-            ("agreement", "images", "s"),
+            ("speedup_sigma", "(+-)", ".3f"),
+            ("var_per_sample", "var/sample", ".4g"),
+            ("efficiency", "efficiency", ".3f"),
+            ("mean_rel_diff", "mean rel diff", "+.2%"),
+            ("mean_rel_sigma", "(1 sigma)", ".2%"),
             ("pixel_mse_over_noise", "pixel MSE / noise", ".2f"),
+            ("agreement", "verdict", "s"),
         ],
     ),
     "profile": (
@@ -928,15 +1081,9 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, s
         log.info("BVH at scale ...")
         results["bvh"] = bvh_section(settings, variant, device)
     if "features" in chosen:
-        log.info("specialised kernels ...")
+        log.info("effects on demand ...")
         results["features"] = features_section(scene, camera, settings, device)
-    for row in results["features"]:
-        if row["agreement"] not in ("agree", "not checked"):
-            notes.append(
-                f"features, {row['case']}: specialised and all-features images differ by "
-                f"{100 * row['mean_rel_diff']:+.2f} % (1 sigma {100 * row['mean_rel_sigma']:.2f} %): "
-                + ("a bug, not noise" if row["agreement"] == "DIFFER" else "within the noise of this run")
-            )
+        notes += effect_notes(results["features"])
     if "profile" in chosen:
         log.info("profile ...")
         results["profile"] = profile_section(scene, camera, settings, variant, device)
@@ -968,7 +1115,17 @@ def _main(argv=None) -> int:
     p.add_argument("--variant")
     p.add_argument("--no-mitsuba", action="store_true")
     p.add_argument("--device")
+    e = sub.add_parser("features-only", help="only the effects-on-demand table (no Mitsuba)")
+    e.add_argument("--quick", action="store_true")
+    e.add_argument("--out", default="docs/benchmarks")
+    e.add_argument("--device")
+    e.add_argument("--width", type=int)
+    e.add_argument("--height", type=int)
     args = parser.parse_args(argv)
+    if args.command == "features-only":
+        logging.basicConfig(level=logging.INFO, format="%(message)s")
+        run_effects(args.quick, args.out, args.device, args.width, args.height)
+        return 0
     settings = QUICK if args.mode == "quick" else FULL
     settings = replace(
         settings,
