@@ -10,7 +10,7 @@ import pytest
 
 import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
 from invrender.bench.harness import time_at_rmse
-from invrender.bench.render import EFFECT_SCENES, MIXTURE, QUICK, scalar_settings, subdivide_mesh
+from invrender.bench.render import EFFECT_SCENES, MITSUBA_SPLIT, MIXTURE, QUICK, scalar_settings, subdivide_mesh
 from invrender.cli import main
 from invrender.synthesize.room import make_room
 
@@ -61,7 +61,7 @@ def test_equal_rmse_rows_for_3_and_10_bounces(quick_run):
         assert row["ref_noise_rmse"] < row["target_rmse"]
         assert math.isfinite(row["mean_rel_diff"])
     assert {(r["bounces"], r["renderer"]) for r in report["curves"]} == {
-        (b, n) for b in (3, 10) for n in ("invrender", MIXTURE, "mitsuba")
+        (b, n) for b in (3, 10) for n in ("invrender", MIXTURE, "mitsuba", MITSUBA_SPLIT)
     }
     assert len(report["one_time"]) == 4
     settings = QUICK if report["mitsuba_variant"] == "llvm_ad_rgb" else scalar_settings(QUICK)

@@ -80,6 +80,7 @@ ROOM_VIEW = 2  # the room view that shows the glossy table, the window, floor an
 LAUNCH_SAMPLES = 2_000_000  # path samples per launch / Mitsuba pass (as render/renderer.py)
 PROBE_MARK = "BVHPROBE "
 MIXTURE = "invrender mixture"  # the runner of Features(nee=False) in the equal-RMSE ladder
+MITSUBA_SPLIT = "mitsuba, our light split"  # Mitsuba with the envmap's sampling_weight set to our split
 
 
 @dataclass(frozen=True)
@@ -249,7 +250,7 @@ class InvrenderRunner:
 class MitsubaRunner:
     name = "mitsuba"
 
-    def __init__(self, scene, camera, bounces, variant, roulette_depth=0):
+    def __init__(self, scene, camera, bounces, variant, roulette_depth=0, sky_share=None):
         from .. import mitsuba as bridge  # noqa: I001 - first: it points drjit at a usable libLLVM
         import mitsuba as mi
 
@@ -257,7 +258,14 @@ class MitsubaRunner:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             scene_dict, self.one_time["convert_s"], _ = clock(
-                bridge.scene_to_mitsuba, scene, camera, bounces, 1, variant, roulette_depth=roulette_depth
+                bridge.scene_to_mitsuba,
+                scene,
+                camera,
+                bounces,
+                1,
+                variant,
+                roulette_depth=roulette_depth,
+                sky_share=sky_share,
             )
         self.bridge_warnings = sorted({str(w.message) for w in caught})
         self.scene, self.one_time["load_s"], _ = clock(mi.load_dict, scene_dict, parallel=False)
@@ -349,6 +357,11 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     mix = InvrenderRunner(scene, camera, mixture_features, device)
     mix.name = MIXTURE
     mix.warm_up()
+    # Mitsuba told our light split (the envmap's sampling_weight): what the ratio owes to the split.
+    share = features.w_env / max(features.w_env + features.w_emit, 1e-30)
+    mit_split = MitsubaRunner(scene, camera, bounces, variant, features.roulette_depth, sky_share=share)
+    mit_split.name = MITSUBA_SPLIT
+    mit_split.warm_up()
 
     ref, ref_noise, converged = reference(
         runners, (settings.ref_spp_invrender, settings.ref_spp_mitsuba), f"reference B={bounces}"
@@ -368,7 +381,7 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     # Shuffled: a burst of load from other processes hits a few renders of many rungs, not all
     # repeats of one rung (the medians absorb the former).
     jobs = [jobs[i] for i in np.random.default_rng(0).permutation(len(jobs))]
-    ladder = (inv, mix, mit)
+    ladder = (inv, mix, mit, mit_split)
     for spp, rep in tqdm(jobs, desc=f"ladder B={bounces}", unit="render", leave=False):
         for runner in ladder if rep % 2 == 0 else ladder[::-1]:
             image, wall, cpu = clock(runner.render, spp)
@@ -417,6 +430,7 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
     model = {name: fit_model(settings.ladder, summary[name]["times"], summary[name]["rmses"]) for name in summary}
     t_fit = {name: model_time(m, target) for name, m in model.items()}
     t_mix, extra_mix = time_at_rmse(summary[MIXTURE]["times"], summary[MIXTURE]["rmses"], target)
+    t_split, extra_split = time_at_rmse(summary[MITSUBA_SPLIT]["times"], summary[MITSUBA_SPLIT]["rmses"], target)
     s_inv, s_mit, s_mix = summary["invrender"], summary["mitsuba"], summary[MIXTURE]
     row = {
         "section": "equal_rmse",
@@ -432,7 +446,11 @@ def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, de
         "fit_invrender": model["invrender"],
         "fit_mitsuba": model["mitsuba"],
         "ratio_cpu": cpu_mit / cpu_inv,
-        "extrapolated": bool(extra_inv or extra_mit or extra_mix),
+        "extrapolated": bool(extra_inv or extra_mit or extra_mix or extra_split),
+        "t_mitsuba_split_s": t_split,
+        "ratio_mitsuba_split": t_split / t_inv,
+        "ratio_mitsuba_split_fit": t_fit[MITSUBA_SPLIT] / t_fit["invrender"],
+        "var_per_sample_mitsuba_split": summary[MITSUBA_SPLIT]["var_per_sample"],
         "t_mixture_s": t_mix,
         "ratio_mixture": t_mit / t_mix,
         "ratio_mixture_fit": t_fit["mitsuba"] / t_fit[MIXTURE],
@@ -941,6 +959,8 @@ TABLES = {
             ("ratio_mixture", "ratio mixture", ".3f"),
             ("ratio_mixture_fit", "(fit)", ".3f"),
             ("weights_mixture", "mixture w_env/w_emit", "s"),
+            ("ratio_mitsuba_split", "ratio vs mi with our split", ".3f"),
+            ("ratio_mitsuba_split_fit", "(fit)", ".3f"),
             ("ref_noise_rmse", "ref noise RMSE", ".2g"),
             ("mean_rel_diff", "mean rel diff", "+.3%"),
             ("mean_rel_sigma", "(1 sigma)", ".3%"),

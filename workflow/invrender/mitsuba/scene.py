@@ -74,6 +74,7 @@ def scene_to_mitsuba(
     bsdf: dict | None = None,
     lambertian_native: bool = False,
     roulette_depth: int = 0,
+    sky_share: float | None = None,
 ) -> dict:
     """A dict for `mi.load_dict(..., parallel=False)` that renders `scene` as seen by `camera`.
 
@@ -82,6 +83,9 @@ def scene_to_mitsuba(
     environment, by default `default_envmap_size(kg)`. `integrator` overrides the path integrator,
     `bsdf` the milo BSDF of the maps (one instance, shared by every mesh). lambertian_native:
     Mitsuba's `diffuse` on `lambertian_faces` (see above). roulette_depth: ours (0: none).
+    sky_share: the share of emitter samples that go to the envmap (its `sampling_weight` against
+    the area emitters' 1 each), as our light split w_env / (w_env + w_emit); None: Mitsuba's own
+    even choice among its emitters.
     """
     set_variant(variant)
     maps, mesh = scene.maps, scene.mesh
@@ -115,6 +119,9 @@ def scene_to_mitsuba(
             )
     if np.any(maps.kg > 0):
         out["environment"] = {"type": "envmap", "bitmap": mi.Bitmap(cube_to_latlong(maps.kg, envmap_size))}
+        areas = sum(1 for key in out if key.startswith("emitters"))
+        if sky_share is not None and areas and 0 < sky_share < 1:
+            out["environment"]["sampling_weight"] = float(sky_share / (1 - sky_share) * areas)
     return out
 
 
