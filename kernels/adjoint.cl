@@ -39,6 +39,13 @@
 #error "adjoint.cl: build it with render/adjoint.py's LAYOUT_DEFINES (the gradient layout)"
 #endif
 
+/* The maps whose gradient is wanted, a bit per MAP_* index (render/adjoint.py's wanted_defines):
+ * the others' additions are compiled out (`map` is a constant at every call). */
+#ifndef GRAD_WANTED
+#define GRAD_WANTED ((1 << GRAD_MAPS) - 1)
+#endif
+#define WANTED(map) (((GRAD_WANTED) >> (map)) & 1)
+
 typedef struct {
     float scale[GRAD_MAPS]; /* fixed point: units per 1.0, a power of two */
     float peak[GRAD_MAPS];  /* largest |value| this work-item added */
@@ -50,7 +57,7 @@ typedef float grad_t;
 /* A float atomic add by compare-and-swap on the word's bits. */
 inline void add_grad(global grad_t* target, float value, Accumulator* acc, int map)
 {
-    if (value == 0.0f || !isfinite(value))
+    if (!WANTED(map) || value == 0.0f || !isfinite(value))
         return;
     volatile global uint* word = (volatile global uint*)target;
     uint expected = *word, seen;
@@ -69,7 +76,7 @@ typedef long grad_t;
 
 inline void add_grad(global grad_t* target, float value, Accumulator* acc, int map)
 {
-    if (value != 0.0f && isfinite(value)) {
+    if (WANTED(map) && value != 0.0f && isfinite(value)) {
         atom_add(target, (long)rint(value * acc->scale[map])); /* a power of two: exact */
         acc->peak[map] = fmax(acc->peak[map], fabs(value));
     }

@@ -95,3 +95,15 @@ def test_bucketed_float_accumulation_matches_fixed_point(setup):
 def test_unknown_accumulation_is_refused(setup):
     with pytest.raises(ValueError, match="accumulation"):
         backward(setup[5], [setup[1]], setup[2], setup[3], 1, accumulation="float")
+
+
+def test_only_the_wanted_maps_are_differentiated(setup):
+    """maps=("kd",) compiles the other maps' additions out: kd is the same bytes as in a pass
+    over every map (the same paths, the same additions to kd), and only kd comes back."""
+    every = backward(setup[5], [setup[1]], setup[2], setup[3], 16, seed=7)
+    kd_only = backward(setup[5], [setup[1]], setup[2], setup[3], 16, seed=7, maps=("kd",))
+    assert list(kd_only) == ["kd"]
+    assert np.abs(every["kd"]).max() > 0
+    np.testing.assert_array_equal(kd_only["kd"], every["kd"])
+    with pytest.raises(ValueError, match="maps"):
+        backward(setup[5], [setup[1]], setup[2], setup[3], 1, maps=("albedo",))

@@ -232,7 +232,14 @@ class InvrenderGradient:
         options = {"accumulation": accumulation} if accumulation != "fixed" else {}
         with _counting_adjoint_runs() as runs:
             grads = backward(
-                self.renderer, cameras, self.requests, adjoint, int(spp), backward_seed(self._seed), **options
+                self.renderer,
+                cameras,
+                self.requests,
+                adjoint,
+                int(spp),
+                backward_seed(self._seed),
+                maps=("kd",),  # what prb differentiates: the kd bitmap alone has gradients enabled
+                **options,
             )
         self.last = {
             "forward_s": forward,
@@ -248,7 +255,9 @@ class InvrenderGradient:
 
         self._seed += 1
         adjoint = 2.0 * (np.asarray(image, np.float32).reshape(-1, 3) - self.target) / self.target.size
-        grads = backward(self.renderer, [self.camera], self.requests, adjoint, int(spp), backward_seed(self._seed))
+        grads = backward(
+            self.renderer, [self.camera], self.requests, adjoint, int(spp), backward_seed(self._seed), maps=("kd",)
+        )
         return np.asarray(grads["kd"], np.float64)
 
     def warm_up(self, spp: int = 1):

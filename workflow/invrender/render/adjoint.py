@@ -62,8 +62,13 @@ def backward(
     seed: int = 0,
     accumulation: str = "auto",
     num_buckets: int = NUM_BUCKETS,
+    maps: tuple[str, ...] = MAPS,
 ) -> dict[str, np.ndarray]:
-    """d Loss / d map for every map, given dLoss/dL of each request (n, 3).
+    """d Loss / d map for each of `maps` (default all), given dLoss/dL of each request (n, 3).
+
+    Only the wanted maps' additions are compiled in (`wanted_defines`): an optimiser of kd alone
+    (as Mitsuba differentiates only the parameters with gradients enabled) pays no atomics for
+    ke, kw, kg, ks or ka.
 
     accumulation: "fixed" (64-bit fixed-point atomics: the same seed gives the same bytes on one
     device; see docs/benchmarks.md for its cost), "buckets" (MILO's float copies chosen by ray
@@ -73,6 +78,7 @@ def backward(
     not depend on how the loss is normalised.
     """
     accumulation = choose_accumulation(renderer.context.devices[0], accumulation)
+    wanted = wanted_defines(maps)
     adjoint = np.asarray(adjoint, np.float32)
     if not np.isfinite(adjoint).all():
         raise ValueError("backward: adjoint: expected finite dLoss/dL for every ray, got NaN or Inf")
@@ -84,7 +90,7 @@ def backward(
     else:
         per_sample = adjoint / np.float32(norm * spp)  # each sample is 1/spp of the estimate
         launch = lambda dtype, buckets, defines, scales: _accumulate(
-            renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines, scales
+            renderer, cameras, requests, per_sample, spp, seed, sizes, dtype, buckets, defines + wanted, scales
         )
         if accumulation == "fixed":
             atlas, kg = _fixed_point(launch, len(requests) * spp * (renderer.features.max_bounces + 2))
@@ -99,7 +105,17 @@ def backward(
         for name, channels in GRAD_CHANNELS.items()
     }
     out["kg"] = kg.reshape(6, host.cube_n, host.cube_n, 3)
-    return out
+    return {name: out[name] for name in MAPS if name in maps}
+
+
+def wanted_defines(maps) -> tuple[str, ...]:
+    """adjoint.cl's GRAD_WANTED, a bit per map of MAPS; empty for all of them (the default)."""
+    unknown = sorted(set(maps) - set(MAPS))
+    if unknown or not maps:
+        raise ValueError(f"backward: maps: expected a non-empty subset of {MAPS}, got {tuple(maps)}")
+    if set(maps) == set(MAPS):
+        return ()
+    return (f"-D GRAD_WANTED={sum(1 << MAPS.index(name) for name in set(maps))}",)
 
 
 _told_buckets: set[str] = set()  # devices already named in the log
