@@ -9,14 +9,17 @@
 #include "camera.h"
 #include "integrator.h"
 
-/* Adds samples [sample_start, sample_start + sample_count) of each request to accum (sum of L,
- * w = number of non-finite samples dropped) and accum_sq (sum of L^2, for error bars; w = number
- * of paths ended on a suspect density or weight). Long renders are split into several launches
- * by the host (progress, GPU watchdogs). */
+/* Adds samples [sample_start, sample_start + sample_count) of each request to accum (sum of
+ * L - shift, w = number of non-finite samples dropped) and accum_sq (sum of (L - shift)^2, for
+ * error bars; w = number of paths ended on a suspect density or weight). shift is the request's
+ * first finite sample, set by the launch that starts at sample 0: sums of squares about a value
+ * near the mean keep the variance from cancelling to float noise (L^2 sums lose it when the
+ * variance is below ~1e-7 of L^2, as where NEE makes a pixel nearly noiseless). Long renders are
+ * split into several launches by the host (progress, GPU watchdogs). */
 kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
                         global const int4* requests, int num_requests, ulong seed,
                         uint sample_start, uint sample_count, global float4* accum,
-                        global float4* accum_sq)
+                        global float4* accum_sq, global float4* shift)
 {
     int i = get_global_id(0);
     if (i >= num_requests)
@@ -26,6 +29,7 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
     global const CameraData* cam = cameras + q.x;
     float3 sum = (float3)(0.0f), sum_sq = (float3)(0.0f);
     float dropped = 0.0f, suspects = 0.0f;
+    float4 centre = sample_start == 0 ? (float4)(0.0f) : shift[i]; /* w: 1 once a sample set it */
     for (uint k = sample_start; k < sample_start + sample_count; ++k) {
         float3 d = camera_sample_direction(cam, q, seed, k);
         int suspect = 0;
@@ -35,9 +39,13 @@ kernel void render_rays(SCENE_PARAMS, global const CameraData* cameras,
             dropped += 1.0f;
             continue;
         }
-        sum += L;
-        sum_sq += L * L;
+        if (centre.w == 0.0f)
+            centre = (float4)(L, 1.0f);
+        float3 x = L - centre.xyz;
+        sum += x;
+        sum_sq += x * x;
     }
+    shift[i] = centre;
     accum[i] += (float4)(sum, dropped);
     accum_sq[i] += (float4)(sum_sq, suspects);
 }

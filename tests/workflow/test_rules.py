@@ -202,7 +202,11 @@ def test_features_analyses_the_scene(built, test_config):
         "window",
         "env_sampling",
         "one_sided",
+        "nee",
         "max_bounces",
+        "roulette_depth",
+        "w_env",
+        "w_emit",
     }
     # The recovered room: emission where its maps emit, the specular lobe where they are glossy.
     from invrender.scene.format import load_scene

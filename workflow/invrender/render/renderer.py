@@ -147,15 +147,23 @@ class Renderer:
         cams, reqs = self.request_buffers(cameras, requests)
         accum, accum_buf = self._zeros((n, 4))
         accum_sq, accum_sq_buf = self._zeros((n, 4))
+        shift, shift_buf = self._zeros((n, 4))
         self.sample_launches(
-            self.render_kernel, n, spp, seed, (cams, reqs, np.int32(n)), (accum_buf, accum_sq_buf), progress=progress
+            self.render_kernel,
+            n,
+            spp,
+            seed,
+            (cams, reqs, np.int32(n)),
+            (accum_buf, accum_sq_buf, shift_buf),
+            progress=progress,
         )
-        cl.enqueue_copy(self.queue, accum, accum_buf)
-        cl.enqueue_copy(self.queue, accum_sq, accum_sq_buf)
+        for host, buf in ((accum, accum_buf), (accum_sq, accum_sq_buf), (shift, shift_buf)):
+            cl.enqueue_copy(self.queue, host, buf)
         dropped = int(accum[:, 3].sum() + accum_sq[:, 3].sum())
-        kept = np.maximum(spp - accum[:, 3:4], 1)
-        mean = accum[:, :3] / kept
-        variance = np.maximum(accum_sq[:, :3] / kept - mean**2, 0) / kept
+        kept = np.maximum(spp - accum[:, 3:4], 1).astype(np.float64)
+        offset = accum[:, :3] / kept  # the mean's distance from the shift (render.cl)
+        mean = shift[:, :3] + offset
+        variance = np.maximum(accum_sq[:, :3] / kept - offset**2, 0) / kept
         return mean.astype(np.float32), variance.astype(np.float32), dropped
 
     def aovs(self, cameras: list[Camera], requests: np.ndarray) -> dict[str, np.ndarray]:
