@@ -82,29 +82,35 @@ inline float3 trace_path(const SceneData* s, float3 o, float3 d, ulong seed, uin
         if (vertex)
             start_vertex(vertex, beta, d);
         SurfacePoint sp;
-        if (hit.slot >= 0)
+        Material m;
+        float3 E = (float3)(0.0f); /* what the ray finds: kg on an escape, else E of the hit */
+        if (hit.slot >= 0) {
             sp = surface_point(s, &hit, d);
+            m = material_at(s, sp.texel);
+            if (sp.emits)
+                E = emitted(s, &m, d);
+        } else {
+#ifdef FEATURE_ENVIRONMENT
+            E = environment(s, d);
+#endif
+        }
         float mis = 1.0f;
 #ifdef NEE_ACTIVE
-        if (bsdf_pdf > 0.0f && (hit.slot < 0 || sp.emits))
+        /* The weight counts only where the ray found light, or where the adjoint differentiates
+         * E (ke of a dark texel too): a forward path skips the light density at a plain wall. */
+        if (bsdf_pdf > 0.0f && (hit.slot < 0 || sp.emits) && (vertex || max3(E) > 0.0f))
             mis = mis_power(bsdf_pdf, light_pdf(s, &lights, d, &hit, &sp));
         if (vertex)
             vertex->mis = mis;
 #endif
-        if (hit.slot < 0) {
-#ifdef FEATURE_ENVIRONMENT
-            radiance += beta * mis * environment(s, d);
-#endif
+        radiance += beta * mis * E;
+        if (hit.slot < 0)
             break;
-        }
-        Material m = material_at(s, sp.texel);
         if (vertex) {
             vertex->texel = sp.texel;
             vertex->n = sp.n;
             vertex->emits = sp.emits;
         }
-        if (sp.emits)
-            radiance += beta * mis * emitted(s, &m, d);
         if (bounce == MAX_BOUNCES)
             break;
         Material q = proposal_at(s, sp.texel, &m);
