@@ -78,14 +78,18 @@ class KernelProbe:
         )
         return out
 
+    def _cases(self, count, texel, *vectors):
+        """Input buffers for `count` cases: the texel (None: none) and 3-vectors, each broadcast."""
+        texels = [] if texel is None else [self._in(np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy())]
+        return texels + [self._in(as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))) for v in vectors]
+
     def mixture(self, texel, x, n, wo, u):
         """Sampled wi (N, 3), its mixture pdf (N,), f cos (N, 3), strategy pdfs (N, 4)."""
         count = len(x)
-        texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
         wi, parts, f = self._run(
             "probe_mixture",
             count,
-            [self._in(texel), self._in(as4(x)), self._in(as4(n)), self._in(as4(wo)), self._in(as4(u))],
+            [*self._cases(count, texel, x, n, wo), self._in(as4(u))],
             [np.zeros((count, 4), np.float32) for _ in range(3)],
             scene=True,
         )
@@ -93,12 +97,10 @@ class KernelProbe:
 
     def mixture_pdf(self, texel, x, n, wo, wi):
         count = len(wi)
-        bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
-        texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
         (pdf,) = self._run(
             "probe_mixture_pdf",
             count,
-            [self._in(texel), self._in(bx(x)), self._in(bx(n)), self._in(bx(wo)), self._in(as4(wi))],
+            [*self._cases(count, texel, x, n, wo), self._in(as4(wi))],
             [np.zeros(count, np.float32)],
             scene=True,
         )
@@ -108,12 +110,10 @@ class KernelProbe:
         """Next-event estimation's light samples: directions (N, 3) and whether each found a
         segment (N,) (kernels/nee.h)."""
         count = len(u)
-        bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
-        texel = np.broadcast_to(np.asarray(texel, np.int32), (count,)).copy()
         (out,) = self._run(
             "probe_light",
             count,
-            [self._in(texel), self._in(bx(x)), self._in(bx(n)), self._in(bx(wo)), self._in(as4(u))],
+            [*self._cases(count, texel, x, n, wo), self._in(as4(u))],
             [np.zeros((count, 4), np.float32)],
             scene=True,
         )
@@ -121,11 +121,10 @@ class KernelProbe:
 
     def light_pdf(self, x, n, directions):
         count = len(directions)
-        bx = lambda v: as4(np.broadcast_to(np.asarray(v, np.float32), (count, 3)))
         (pdf,) = self._run(
             "probe_light_pdf",
             count,
-            [self._in(bx(x)), self._in(bx(n)), self._in(as4(directions))],
+            [*self._cases(count, None, x, n), self._in(as4(directions))],
             [np.zeros(count, np.float32)],
             scene=True,
         )
