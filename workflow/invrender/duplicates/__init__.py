@@ -1,0 +1,1 @@
+"""Structure from Duplicates: poses of identical objects and their shared mesh from one image."""
