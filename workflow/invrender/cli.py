@@ -88,7 +88,10 @@ def cmd_edit(args):
 def cmd_cameras(args):
     from .cameras import stage
 
-    stage.run(args.source, args.out, images_dir=args.images, face_size=args.face_size)
+    if args.field_of_view is not None or args.focal_length is not None:
+        stage.run_photograph(args.source, args.out, args.field_of_view, args.focal_length)
+    else:
+        stage.run(args.source, args.out, images_dir=args.images, face_size=args.face_size)
 
 
 def cmd_geometry(args):
@@ -151,9 +154,14 @@ def cmd_milo(args):
 
 
 def cmd_bake(args):
-    from .bake import stage
+    from .bake import duplicates, stage
 
-    stage.run(args.maps, args.geometry, args.cameras, args.out, training_path=args.training)
+    if args.poses:
+        if not args.masks:
+            raise SystemExit("bake --poses: --masks (the instance id PNG) is required")
+        duplicates.run(args.geometry, args.poses, args.cameras, args.masks, args.out)
+    else:
+        stage.run(args.maps, args.geometry, args.cameras, args.out, training_path=args.training)
 
 
 def cmd_export(args):
@@ -181,6 +189,18 @@ def cmd_import_usd(args):
     from .export import import_usd
 
     import_usd(args.usd, args.out, exact=not args.standard_only)
+
+
+def cmd_duplicates(args):
+    from .duplicates import stage
+
+    settings = stage.settings_from(_key_values(args.set))
+    if args.step == "crop":
+        stage.run_crop(args.cameras, args.masks, args.instance, args.crop, args.features, settings, image=args.image)
+    else:
+        stage.run_solve(
+            args.cameras, args.masks, args.instances, args.crops, args.features, args.out, settings, image=args.image
+        )
 
 
 def cmd_evaluate(args):
@@ -294,6 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
         "equirectangular panoramas unwrapped into six cube faces each; without it, the model only",
     )
     p.add_argument("--face-size", type=int, help="cube-face width in pixels (default: a quarter of the panorama's)")
+    lens = p.add_mutually_exclusive_group()
+    lens.add_argument("--field-of-view", type=float, help="SOURCE is a photograph: its horizontal field of view (deg)")
+    lens.add_argument("--focal-length", type=float, help="SOURCE is a photograph: its focal length in pixels")
     p.set_defaults(func=cmd_cameras)
 
     p = stages.add_parser(
@@ -356,10 +379,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_milo)
 
     p = stages.add_parser("bake", help="recovered maps + mesh + cameras -> a scene directory")
-    p.add_argument("--maps", required=True, help="maps.npz of the milo stage")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--maps", help="maps.npz of the milo stage (a multiview scene)")
+    source.add_argument("--poses", help="poses.json of the duplicates stage: the mesh instanced at every pose")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
-    p.add_argument("--cameras", required=True, help="COLMAP model directory")
+    p.add_argument("--cameras", required=True, help="COLMAP model directory (with images/ for --poses)")
     p.add_argument("--training", help="training.json of the milo stage (recorded in scene.json's metadata)")
+    p.add_argument("--masks", help="with --poses: the instance id PNG (which copy each pixel shows)")
     p.add_argument("--out", required=True, help="scene directory to write")
     p.set_defaults(func=cmd_bake)
 
@@ -401,6 +427,27 @@ def build_parser() -> argparse.ArgumentParser:
         "--standard-only", action="store_true", help="ignore the invrender: attributes: the scene other USD tools see"
     )
     p.set_defaults(func=cmd_import_usd)
+
+    p = stages.add_parser("duplicates", help="identical objects in one photo -> their poses and one shared mesh (SfD)")
+    steps = p.add_subparsers(dest="step", required=True, metavar="STEP")
+    for step, text in (
+        ("crop", "one instance's crop and its features at every rotation angle"),
+        ("solve", "match the crops, COLMAP's virtual cameras, hull, refinement -> poses.json, object.ply, sparse/"),
+    ):
+        q = steps.add_parser(step, help=text)
+        q.add_argument("--cameras", required=True, help="the photograph's camera model with images/ (cameras stage)")
+        q.add_argument("--image", help="the photograph's name, if the model has more than one camera")
+        q.add_argument("--masks", required=True, help="instance id PNG (segment stage: masks/<image stem>.png)")
+        q.add_argument("--features", required=True, help="crop: file to write; solve: folder of instance_NNN.npz")
+        q.add_argument("--set", action="append", metavar="KEY=JSON", help="a setting (docs/duplicates.md), repeatable")
+        q.set_defaults(func=cmd_duplicates)
+        if step == "crop":
+            q.add_argument("--instance", type=int, required=True, help="the instance id in the mask")
+            q.add_argument("--crop", required=True, help="file to write (crop pixels, mask, offset, scale)")
+        else:
+            q.add_argument("--instances", required=True, help="segment stage's instances.json")
+            q.add_argument("--crops", required=True, help="folder of instance_NNN.npz crops")
+            q.add_argument("--out", required=True, help="directory to write")
 
     p = stages.add_parser("evaluate", help="a recovered scene against the truth -> metrics.json + figures")
     p.add_argument("--scene", required=True, help="the recovered scene directory")

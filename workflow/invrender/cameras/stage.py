@@ -12,11 +12,13 @@ resampled from it in linear RGB and written as float EXR (cameras/panorama.py).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import shutil
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
 
+import numpy as np
 from tqdm import tqdm
 
 from ..scene.atomic import atomic_dir, check_output
@@ -28,7 +30,7 @@ from ..scene.cameras import (
     write_colmap_text,
 )
 from ..scene.capture import read_view
-from ..scene.images import write_exr
+from ..scene.images import read_image, write_exr
 from ..scene.types import Camera, SceneError, require_positive
 from .panorama import face_cameras, unwrap
 
@@ -136,3 +138,34 @@ def _link(source: Path, target: Path) -> None:
         os.link(source, target)
     except OSError:
         shutil.copyfile(source, target)
+
+
+def photograph_camera(photo, field_of_view: float | None = None, focal_length: float | None = None) -> Camera:
+    """The camera of a photograph without a model: a pinhole at the world's origin looking down +z
+    (OpenCV axes), its principal point the image's centre, its focal length given in pixels or
+    by the horizontal field of view in degrees."""
+    photo = Path(photo)
+    height, width = read_image(photo).shape[:2]
+    if (field_of_view is None) == (focal_length is None):
+        raise SceneError(photo, "field of view", "one of field_of_view (degrees) or focal_length (pixels)")
+    if focal_length is None:
+        if not 0 < field_of_view < 180:
+            raise SceneError(photo, "field_of_view", f"degrees in (0, 180), got {field_of_view}")
+        focal_length = width / 2 / math.tan(math.radians(field_of_view) / 2)
+    if not (math.isfinite(focal_length) and focal_length > 0):
+        raise SceneError(photo, "focal_length", f"a positive number of pixels, got {focal_length}")
+    params = np.array([focal_length, focal_length, width / 2, height / 2], np.float64)
+    return Camera(photo.name, "PINHOLE", width, height, params, np.eye(3), np.zeros(3))
+
+
+def run_photograph(photo, out_dir, field_of_view=None, focal_length=None) -> list[Camera]:
+    """A one-camera COLMAP text model for a photograph (``photograph_camera``), the photograph
+    linked into out_dir/images/."""
+    check_output(out_dir, "cameras")
+    camera = photograph_camera(photo, field_of_view, focal_length)
+    with atomic_dir(out_dir, kind="cameras") as tmp:
+        read_view(Path(photo).parent, camera)  # checked: finite pixels
+        _link(Path(photo), _inside(tmp / "images", camera.name))
+        write_colmap_text(tmp, [camera])
+    log.info("%s: a camera of focal length %.1f px -> %s", photo, camera.focal[0], out_dir)
+    return [camera]

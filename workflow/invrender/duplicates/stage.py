@@ -1,0 +1,314 @@
+"""The `duplicates` stage (`invrender duplicates`): poses of N identical objects and their shared
+mesh, from one photograph and its instance masks (Structure from Duplicates, section 3.1).
+
+Two steps, so that the per-instance work fans out from the segment checkpoint:
+
+    invrender duplicates crop   one instance: its crop (crops.py) and its features at every
+                                rotation angle (matching.py) -> crops/instance_NNN.npz,
+                                crops/instance_NNN.features.npz
+    invrender duplicates solve  every pair matched with the rotation search (matching.py),
+                                COLMAP's virtual cameras (mapping.py), the visual hull (hull.py),
+                                render-and-compare refinement (refine.py), then out_dir/:
+
+      sparse/            COLMAP's model of the virtual cameras (one camera: the real one), in the
+                         object frame of poses.json
+      poses.json         T_obj2world per instance (DESIGN.md), after refinement; `registered`
+                         false for an instance nothing could place
+      poses_colmap.json  the same from COLMAP alone (before refinement)
+      object.ply         the shared mesh in the object frame (the geometry stage unwraps it)
+      duplicates.json    the report: pairs, angles, match counts, verified inliers, who registered,
+                         refinement residuals, timings, what fixed the scale
+      overlay.png        the photo with the mesh's outline at every recovered pose
+
+The object frame: origin at the hull's centroid, axes COLMAP's; the scale is COLMAP's arbitrary one
+unless `object_size` (the object's largest bounding-box extent, meters) fixes it, and poses.json
+says which.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import logging
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..scene.atomic import atomic_dir, atomic_path, check_output
+from ..scene.cameras import read_cameras
+from ..scene.capture import read_view
+from ..scene.images import read_mask
+from ..scene.mesh_io import write_ply
+from ..scene.poses import write_poses
+from ..scene.types import Camera, Mesh, SceneError
+from . import hull, mapping, matching, refine
+from .crops import Crop, instance_boxes, make_crop
+from .figures import write_overlay
+
+__all__ = ["Settings", "run_crop", "run_solve"]
+
+log = logging.getLogger(__name__)
+
+MIN_INSTANCES = 3  # two views give one relative pose and nothing to check it against
+
+
+@dataclass
+class Settings:
+    matcher: str = "xfeat"
+    rotation_search: bool = True
+    step_deg: float = 4.0
+    crop_size: int = 256
+    crop_pad: float = 0.1
+    masked: bool = True
+    refine: bool = True
+    refine_rounds: int = 2
+    hull_resolution: int = 96
+    hull_faces: int = 4000
+    object_size: float | None = None
+    max_error_px: float = 4.0
+    seed: int = 0
+
+
+def intrinsics(camera: Camera) -> np.ndarray:
+    if np.any(camera.distortion):
+        raise SceneError(camera.name, "camera model", "a pinhole camera (undistort the photograph first)")
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64)
+
+
+def load_photo(cameras_dir, image: str | None = None) -> tuple[Camera, np.ndarray]:
+    """The photograph's camera (the cameras stage's model: the only camera, or the one named
+    `image`) and its linear RGB pixels."""
+    cameras = read_cameras(cameras_dir)
+    if image is not None:
+        cameras = [c for c in cameras if Path(c.name).stem == Path(image).stem]
+    if len(cameras) != 1:
+        raise SceneError(cameras_dir, "cameras", f"one camera for the photograph, got {len(cameras)}")
+    return cameras[0], read_view(Path(cameras_dir) / "images", cameras[0])
+
+
+def load_ids(masks_path, camera: Camera) -> np.ndarray:
+    ids = read_mask(masks_path)
+    if ids.shape != (camera.height, camera.width):
+        raise SceneError(
+            masks_path,
+            "size",
+            f"the photograph's size {camera.width} x {camera.height}, got {ids.shape[1]} x {ids.shape[0]}",
+        )
+    return ids
+
+
+# ---------------------------------------------------------------------------- per instance
+
+
+def save_crop(path, crop: Crop) -> None:
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **asdict(crop))
+
+
+def load_crop(path) -> Crop:
+    with np.load(path) as data:
+        return Crop(int(data["instance_id"]), data["image"], data["mask"], data["offset"], float(data["scale"]))
+
+
+def run_crop(cameras_dir, masks_path, instance_id: int, crop_path, features_path, settings: Settings, image=None):
+    """One instance's crop and features."""
+    camera, photo = load_photo(cameras_dir, image)
+    ids = load_ids(masks_path, camera)
+    box = instance_boxes(ids).get(instance_id)
+    if box is None:
+        raise SceneError(masks_path, f"instance {instance_id}", "an instance id present in the mask")
+    crop = make_crop(photo, ids, instance_id, box, settings.crop_size, settings.crop_pad, settings.masked)
+    features = matching.extract(crop, settings.matcher, settings.step_deg, rotations=settings.rotation_search)
+    save_crop(crop_path, crop)
+    with atomic_path(features_path) as tmp:
+        features.save(tmp)
+    log.info("instance %d: crop %.2f px/px at %s", instance_id, crop.scale, np.round(crop.offset, 1).tolist())
+
+
+# ---------------------------------------------------------------------------- all instances
+
+
+def match_all(crops: dict[int, Crop], features: dict, settings: Settings, progress: bool = True):
+    """Every pair, a at angle 0 against b at every angle: full-image correspondences per pair,
+    and what the search chose (for the report)."""
+    pairs, report = {}, []
+    todo = list(itertools.combinations(sorted(crops), 2))
+    for a, b in tqdm(todo, desc="match", unit="pair", disable=not progress):
+        m = matching.match_pair(features[a], features[b], settings.matcher, rotation_search=settings.rotation_search)
+        pairs[a, b] = (crops[a].to_full(m.xy_a), crops[b].to_full(m.xy_b))
+        report.append({"pair": [a, b], "angle_deg": float(m.angle_deg), "matches": int(len(m.xy_a))})
+    return pairs, report
+
+
+def object_frame(mesh: Mesh, object_size: float | None) -> tuple[np.ndarray, float, str]:
+    """(centre, scale, what fixed the scale): p_colmap = centre + scale * p_obj."""
+    positions = mesh.positions.astype(np.float64)
+    centre = positions.mean(axis=0)
+    extent = float((positions.max(axis=0) - positions.min(axis=0)).max())
+    if object_size is None:
+        return centre, 1.0, "arbitrary: COLMAP's gauge (set duplicates.object_size to fix it in meters)"
+    return centre, extent / object_size, f"object_size: the object's largest extent is {object_size} m"
+
+
+def reframe(T: np.ndarray, centre: np.ndarray, scale: float) -> np.ndarray:
+    """T_cam_from_obj for p_colmap = centre + scale * p_obj, the camera frame divided by scale
+    (one camera cannot tell a scene from a scaled copy of it)."""
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3]
+    out[:3, 3] = (T[:3, :3] @ centre + T[:3, 3]) / scale
+    return out
+
+
+def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str) -> dict:
+    return {
+        "convention": (
+            "p_world = T_obj2world @ [p_obj, 1]; T_obj2world row-major 4x4; world = the photograph's "
+            "camera model's world; object frame = object.ply"
+        ),
+        "scale": scale_note,
+        "source": source,
+        "instances": [
+            {
+                "instance_id": int(i),
+                "mask_value": int(i),
+                "registered": i in poses,
+                "T_obj2world": (world_from_cam @ poses[i] if i in poses else np.eye(4)).tolist(),
+            }
+            for i in all_ids
+        ],
+    }
+
+
+def _carve(ids, poses, K, points, settings: Settings):
+    bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_poses(ids, poses, K)
+    return hull.hull_mesh(ids, poses, K, bounds, resolution=settings.hull_resolution, faces=settings.hull_faces)
+
+
+def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
+    """Match, map, carve and refine; returns everything run_solve writes (COLMAP's frame)."""
+    started = time.perf_counter()
+    pairs, pair_report = match_all(crops, features, settings, progress)
+    if not any(len(xy_a) for xy_a, _ in pairs.values()):
+        raise SceneError(
+            "duplicates", "matches", f"matches between some of the {len(crops)} crops; found none in any pair"
+        )
+    height, width = ids.shape
+    registration = mapping.register(workdir, K, width, height, sorted(crops), pairs, seed=settings.seed)
+    timings = {"match_and_map_s": time.perf_counter() - started}
+    if len(registration.poses) < 2:
+        raise SceneError(
+            "duplicates",
+            "registration",
+            f"COLMAP to register at least 2 of the {len(crops)} instances; it registered "
+            f"{len(registration.poses)} (unregistered: {registration.unregistered})",
+        )
+    mesh = _carve(ids, registration.poses, K, registration.points, settings)
+    poses, rounds = dict(registration.poses), []
+    if settings.refine:
+        poses, mesh, rounds = _refine_rounds(photo, ids, K, poses, mesh, registration, settings)
+    timings["total_s"] = time.perf_counter() - started
+    return {
+        "registration": registration,
+        "pairs": pair_report,
+        "poses": poses,
+        "mesh": mesh,
+        "rounds": rounds,
+        "timings": timings,
+    }
+
+
+def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings):
+    """Refine the poses against the masks and pixels with the hull, carve again; keep a round
+    while the mean residual falls."""
+    rounds, best = [], None
+    unregistered = list(registration.unregistered)
+    for k in range(settings.refine_rounds):
+        result = refine.refine_poses(mesh, K, ids, photo, poses, unregistered=unregistered)
+        residual = float(np.mean(list(result.residual_after.values())))
+        rounds.append({"round": k, **result.summary()})
+        if best is not None and residual >= best:
+            break
+        best, poses, unregistered = residual, result.poses, []
+        mesh = _carve(ids, poses, K, np.zeros((0, 3)), settings)
+    return poses, mesh, rounds
+
+
+def run_solve(
+    cameras_dir,
+    masks_path,
+    instances_path,
+    crops_dir,
+    features_dir,
+    out_dir,
+    settings: Settings,
+    image=None,
+    progress: bool = True,
+) -> dict:
+    check_output(out_dir, "duplicates")
+    camera, photo = load_photo(cameras_dir, image)
+    ids = load_ids(masks_path, camera)
+    listed = [int(entry["id"]) for entry in json.loads(Path(instances_path).read_text())["instances"]]
+    if len(listed) < MIN_INSTANCES:
+        raise SceneError(
+            instances_path, "instances", f"at least {MIN_INSTANCES} instances of the object; found {len(listed)}"
+        )
+    crops = {i: load_crop(Path(crops_dir) / f"instance_{i:03d}.npz") for i in listed}
+    features = {i: matching.CropFeatures.load(Path(features_dir) / f"instance_{i:03d}.features.npz") for i in listed}
+    K = intrinsics(camera)
+    with atomic_dir(out_dir, kind="duplicates") as tmp:
+        found = solve(photo, ids, K, crops, features, tmp / "colmap", settings, progress)
+        report = _write(tmp, found, camera, K, photo, ids, listed, settings)
+    log.info("duplicates: %d of %d instances placed -> %s", len(found["poses"]), len(listed), out_dir)
+    return report
+
+
+def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settings: Settings) -> dict:
+    centre, scale, note = object_frame(found["mesh"], settings.object_size)
+    world_from_cam = np.linalg.inv(camera.world_to_camera())
+    registration = found["registration"]
+    before = {i: reframe(T, centre, scale) for i, T in registration.poses.items()}
+    after = {i: reframe(T, centre, scale) for i, T in found["poses"].items()}
+    mesh = found["mesh"]
+    mesh = Mesh(((mesh.positions - centre) / scale).astype(np.float32), mesh.faces, uvs=None)
+    write_ply(tmp / "object.ply", mesh)
+    write_poses(tmp / "poses_colmap.json", poses_document(before, listed, world_from_cam, note, "COLMAP"))
+    source = "COLMAP, refined by render-and-compare" if settings.refine else "COLMAP"
+    write_poses(tmp / "poses.json", poses_document(after, listed, world_from_cam, note, source))
+    mapping.write_model(registration, tmp / "sparse", centre, scale)
+    write_overlay(tmp / "overlay.png", photo, mesh, K, after)
+    report = {
+        "settings": asdict(settings),
+        "instances": listed,
+        "registered_by_colmap": sorted(registration.poses),
+        "unregistered_by_colmap": registration.unregistered,
+        "placed": sorted(found["poses"]),
+        "sparse_points": int(len(registration.points)),
+        "verified_pairs": [{"pair": list(p), "inliers": n} for p, n in sorted(registration.verified_pairs.items())],
+        "pairs": found["pairs"],
+        "refinement": found["rounds"],
+        "scale": note,
+        "mesh": {"vertices": int(len(mesh.positions)), "faces": int(len(mesh.faces))},
+        "timings": found["timings"],
+    }
+    (tmp / "duplicates.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
+
+
+def settings_from(values: dict) -> Settings:
+    """Settings with `values` (config `duplicates:` keys) over the defaults; an unknown key or a
+    value of the wrong type is refused by name."""
+    known = {f.name: f for f in dataclasses.fields(Settings)}
+    for key, value in values.items():
+        if key not in known:
+            raise SceneError("duplicates --set", key, f"one of {', '.join(known)}")
+    settings = Settings(**values)
+    if settings.matcher not in matching.MATCHERS:
+        allowed = ", ".join(matching.MATCHERS)
+        raise SceneError("duplicates --set", "matcher", f"one of {allowed}, got {settings.matcher!r}")
+    return settings
