@@ -293,14 +293,13 @@ def tree(tmp_path_factory):
     positions = (np.asarray(can.positions, np.float64) - OFFSET) @ Q_TRUE / SCALE  # p' = Q^T (p - o) / s
     write_ply(dup_dir / "object.ply", Mesh(positions=positions.astype(np.float32), faces=can.faces, uvs=None))
     after = [
-        {"instance_id": r, "mask_value": r, "registered": t != 5, "T_obj2world": recovered_pose(poses[t])}
-        for t, r in renumber.items()
+        {"instance_id": 100 + t, "mask_value": r, "registered": t != 5, "T_obj2world": recovered_pose(poses[t])}
+        for t, r in renumber.items()  # its own numbering: the mask value names the pixels
     ]
     twists = dict(zip([1, 2, 3, 4], pairs_of((Y,), TWIST_DEG) * 2, strict=True))
     before = [
         {
             "instance_id": r,
-            "mask_value": r,
             "registered": True,
             "T_obj2world": recovered_pose(poses[t], twists.get(t, np.eye(3))),
         }
@@ -330,7 +329,7 @@ def test_it_writes_metrics_and_the_outline_figure(evaluated):
     assert json.loads((out / "metrics.json").read_text()) == doc
     assert doc["mode"] == "duplicates" and doc["paper"]["table2_color_box"]["10"]["rotation_deg"] == 0.186
     figure = cv2.imread(str(out / "outlines_view_000.png"))
-    assert figure.shape[0] >= 256 and (figure == [255, 255, 255]).all(axis=2).any()  # outlines that agree
+    assert figure.shape[0] >= 256 and (figure == [0, 255, 255]).all(axis=2).any()  # outlines that agree
 
 
 def test_counts_and_masks(evaluated):

@@ -224,13 +224,12 @@ def iou_table(truth_ids, recovered_ids, truth_labels, recovered_labels) -> np.nd
 
 
 def _label_index(ids: np.ndarray, labels) -> np.ndarray:
-    """Each pixel's position + 1 in ``labels`` (0: background or an id not listed)."""
-    labels = np.asarray(labels, np.int64)
-    order = np.argsort(labels)
-    flat = ids.astype(np.int64).ravel()
-    pos = np.searchsorted(labels[order], flat).clip(0, max(len(labels) - 1, 0))
-    found = (len(labels) > 0) & (labels[order][pos] == flat) if len(labels) else np.zeros(flat.shape, bool)
-    return np.where(found, order[pos] + 1, 0).reshape(ids.shape)
+    """Each pixel's position + 1 in ``labels`` (0: background or an id not listed), by a lookup
+    table over every uint16 id."""
+    table = np.zeros(65536, np.int64)
+    table[np.asarray(labels, np.int64)] = np.arange(1, len(labels) + 1)
+    table[0] = 0
+    return table[np.asarray(ids, np.uint16)]
 
 
 def match_instances(iou: np.ndarray, truth_labels, recovered_labels, min_iou: float = MIN_IOU) -> dict[int, int]:
@@ -506,10 +505,20 @@ def read_instances(path) -> dict:
 
 
 def poses_by_id(doc, where) -> tuple[dict[int, np.ndarray], int]:
-    """({instance id: T_obj2world} of the registered instances, how many instances are listed)."""
+    """({mask value: T_obj2world} of the registered instances, how many instances are listed).
+    An instance is known by the value its pixels have in the id image: ``mask_value``, else its
+    ``instance_id`` (DESIGN.md's poses.json)."""
     from ..scene.poses import validate_poses
 
-    return {p["instance_id"]: p["T"] for p in validate_poses(doc, where)}, len(doc["instances"])
+    validate_poses(doc, where)
+    out = {}
+    for k, entry in enumerate(doc["instances"]):
+        value = entry.get("mask_value", entry["instance_id"])
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise SceneError(where, f"instances[{k}].mask_value", f"an integer id of the mask, got {value!r}")
+        if entry.get("registered", True):
+            out[value] = np.asarray(entry["T_obj2world"], np.float64)
+    return out, len(doc["instances"])
 
 
 def load_inputs(segmentation_dir, duplicates_dir, truth_dir) -> dict:
@@ -603,7 +612,7 @@ def _edges(ids: np.ndarray) -> np.ndarray:
 
 def outline_figure(path, photo, truth_ids, recovered_ids, note: str = "") -> None:
     """The photo (linear RGB, or None: grey) with the true instances' outlines in green and the
-    recovered ones' in magenta (white where they agree)."""
+    recovered ones' in magenta (yellow where they agree)."""
     from .figures import _labelled, _rgb8, _write
     from .metrics import reference_exposure, tone_map
 
@@ -612,5 +621,5 @@ def outline_figure(path, photo, truth_ids, recovered_ids, note: str = "") -> Non
     truth_edge, recovered_edge = _edges(truth_ids), _edges(recovered_ids)
     image[truth_edge] = (0, 220, 0)  # BGR
     image[recovered_edge] = (255, 0, 255)
-    image[truth_edge & recovered_edge] = (255, 255, 255)
-    _write(path, _labelled(image, "truth green, recovered magenta", note))
+    image[truth_edge & recovered_edge] = (0, 255, 255)
+    _write(path, _labelled(image, "truth green, recovered magenta, both yellow", note))
