@@ -19,13 +19,16 @@ first aligns what cannot be known:
    frame, estimated from the axes alone (a wrong twist does not move it).
 3. Translations (``translation_metrics``): instance centres (the object's area-weighted surface
    centroid mapped by each pose, true and recovered) aligned by Umeyama's similarity (rotation,
-   translation, scale; recovered -> true), robustly like Q; the error is the distance after it, in
-   the truth's meters and as a fraction of the true object's bounding-box diagonal.
+   translation, scale; recovered -> true), started from the three instances whose fit has the least
+   median residual and trimmed like Q (floor ``ROBUST_FLOOR_FRACTION`` of the diagonal); the error
+   is the distance after it, in the truth's meters and as a fraction of the true object's
+   bounding-box diagonal.
 4. Mesh (``chamfer``): the recovered mesh mapped into the true object frame by p = s Q p' + o (Q from
    2., s from 3., o putting the recovered centroid on the true one); the symmetric Chamfer distance
    is the mean of the two directed mean distances from area-weighted random surface samples to the
    other surface (exact point-to-triangle distances, ``correspond.py``'s search); then again after a
-   rigid ICP (``icp``) from there, which says how much of it is the poses' alignment.
+   rigid point-to-plane ICP (``icp``, no twist about a symmetry axis) from there, which says how
+   much of it is the poses' alignment rather than the shape.
 """
 
 from __future__ import annotations
