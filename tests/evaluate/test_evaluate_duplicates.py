@@ -380,10 +380,15 @@ def test_before_refinement_the_twists_are_reported_as_twist(evaluated):
 
 
 def test_the_cli_runs_the_duplicates_evaluation_and_refuses_bad_input(tree, tmp_path, capsys):
-    args = ["evaluate", "--duplicates", tree["duplicates"], "--segmentation", tree["segmentation"]]
+    only_after = tmp_path / "duplicates"  # no poses_colmap.json: nothing before refinement
+    only_after.mkdir()
+    for name in ("poses.json", "object.ply"):
+        (only_after / name).write_bytes((tree["duplicates"] / name).read_bytes())
+    args = ["evaluate", "--duplicates", only_after, "--segmentation", tree["segmentation"]]
     args += ["--truth", tree["truth"], "--images", tree["images"]]
     assert main([str(a) for a in [*args, "--out", tmp_path / "cli"]]) == 0
-    assert json.loads((tmp_path / "cli" / "metrics.json").read_text())["counts"]["truth"] == 6
+    written = json.loads((tmp_path / "cli" / "metrics.json").read_text())
+    assert written["poses"]["before"] is None and written["counts"]["registered"] == {"before": None, "after": 4}
     assert (
         main(
             [
@@ -404,4 +409,4 @@ def test_the_cli_runs_the_duplicates_evaluation_and_refuses_bad_input(tree, tmp_
     write_mask(small / "masks" / "view_000.png", np.full((72, 96), 5, np.uint16))
     with pytest.raises(SceneError, match="ids: expected only ids of instances.json"):
         run_duplicates(small, tree["duplicates"], tree["truth"], tree["images"], tmp_path / "b")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["cli", "segmentation"]  # nothing half-written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cli", "duplicates", "segmentation"]  # nothing half-written
