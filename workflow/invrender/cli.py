@@ -205,7 +205,19 @@ def cmd_duplicates(args):
 
 def cmd_evaluate(args):
     from .evaluate import stage
+    from .scene.types import SceneError
 
+    if args.duplicates:  # a duplicates scene: masks, poses and the shared mesh
+        if not args.segmentation:
+            raise SceneError("evaluate", "--segmentation", "the segment stage's folder beside --duplicates")
+        stage.run_duplicates(args.segmentation, args.duplicates, args.truth, args.images, args.out, seed=args.seed)
+        return
+    for flag, value, what in (
+        ("--scene", args.scene, "the recovered scene directory"),
+        ("--atlas", args.atlas, "atlas.npz"),
+    ):
+        if not value:
+            raise SceneError("evaluate", flag, f"{what} (or --duplicates for a duplicates scene)")
     stage.run(
         args.scene,
         args.truth,
@@ -450,9 +462,15 @@ def build_parser() -> argparse.ArgumentParser:
             q.add_argument("--out", required=True, help="directory to write")
 
     p = stages.add_parser("evaluate", help="a recovered scene against the truth -> metrics.json + figures")
-    p.add_argument("--scene", required=True, help="the recovered scene directory")
-    p.add_argument("--truth", required=True, help="the true scene directory (capture/ground_truth/scene)")
-    p.add_argument("--atlas", required=True, help="the recovered atlas' atlas.npz (geometry stage)")
+    p.add_argument("--scene", help="the recovered scene directory (multiview)")
+    p.add_argument(
+        "--truth",
+        required=True,
+        help="the true scene directory (capture/ground_truth/scene); with --duplicates capture/ground_truth",
+    )
+    p.add_argument("--atlas", help="the recovered atlas' atlas.npz (geometry stage; multiview)")
+    p.add_argument("--duplicates", help="a duplicates scene's duplicates/ folder (poses.json, object.ply)")
+    p.add_argument("--segmentation", help="with --duplicates: the segment stage's folder (masks/, instances.json)")
     p.add_argument("--images", required=True, help="the captured images, named as the cameras' images")
     p.add_argument("--out", required=True, help="directory to write (metrics.json, figures)")
     p.add_argument(

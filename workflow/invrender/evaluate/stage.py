@@ -14,6 +14,9 @@
    the held-out cameras (all cameras if none are held out), one against the other.
 4. Accuracy against training time (``snapshots.py``): 1. for every snapshot, and the novel-view
    PSNR at ``snapshot_spp`` (0: not rendered).
+
+A duplicates scene (issue 13) has other outputs and other metrics: ``run_duplicates`` scores its
+masks, poses and shared mesh (``duplicates.py``) into the same layout (metrics.json, outlines_<image>.png).
 """
 
 from __future__ import annotations
@@ -32,13 +35,13 @@ from ..scene.capture import read_view
 from ..scene.format import SCENE_JSON, load_scene
 from ..scene.snapshots import check_snapshot, list_snapshots, load_snapshot
 from ..scene.types import ATLAS_MAPS, Scene, SceneError, require_positive
-from . import figures
+from . import duplicates, figures
 from .correspond import DEFAULT_SAMPLES, DEFAULT_SIDE_MARGIN, correspond
 from .maps import DEFAULT_BALL_TEXELS, kg_on_common_cube, map_errors, truth_in_recovered_layout
 from .metrics import PSNR_CAP_DB, image_metrics
 from .views import DEFAULT_RADIUS_FRACTION, insertion, novel_views, place_spheres, render_views
 
-__all__ = ["run", "PAPER", "METRICS_VERSION"]
+__all__ = ["run", "run_duplicates", "PAPER", "METRICS_VERSION"]
 
 log = logging.getLogger(__name__)
 
@@ -205,6 +208,73 @@ def run(
     timings["total"] = time.perf_counter() - started
     log.info("evaluate: wrote %s in %.1f s (%s)", out_dir, timings["total"], _seconds(timings))
     return document
+
+
+def run_duplicates(segmentation_dir, duplicates_dir, truth_dir, images_dir, out_dir, seed: int = 0) -> dict:
+    """Evaluate a duplicates scene: the segment stage's ``segmentation_dir`` (masks/, instances.json)
+    and the duplicates stage's ``duplicates_dir`` (poses.json, poses_colmap.json if there,
+    object.ply) against the capture's ``truth_dir`` (its ground_truth/); ``images_dir`` holds
+    the segmented photo (None: the figure on grey). Writes ``out_dir`` (metrics.json,
+    outlines_<image>.png) and returns metrics.json's document (docs/evaluate.md, "Duplicates")."""
+    from ..scene.images import read_image
+
+    out_dir = Path(out_dir)
+    check_output(out_dir, "evaluate")  # before the work, not after it
+    started = time.perf_counter()
+    inputs = duplicates.load_inputs(segmentation_dir, duplicates_dir, truth_dir)
+    photo = None
+    if images_dir is not None:
+        path = Path(images_dir) / Path(inputs["image"]).name
+        photo = read_image(path)[..., :3]
+        if photo.shape[:2] != inputs["truth_ids"].shape:
+            h, w = inputs["truth_ids"].shape
+            raise SceneError(path, "size", f"{w} x {h} as the masks, got {photo.shape[1]} x {photo.shape[0]}")
+    metrics = duplicates.evaluate(inputs, seed)
+    with atomic_dir(out_dir, kind="evaluate") as tmp:
+        masks = metrics["masks"]
+        note = f"mean IoU {masks['mean_iou']:.3f}, {masks['matched']} of {metrics['counts']['truth']} matched"
+        duplicates.outline_figure(
+            Path(tmp) / f"outlines_{inputs['stem']}.png", photo, inputs["truth_ids"], inputs["recovered_ids"], note
+        )
+        document = {
+            "version": METRICS_VERSION,
+            "mode": "duplicates",
+            "inputs": {
+                "segmentation": str(segmentation_dir),
+                "duplicates": str(duplicates_dir),
+                "truth": str(truth_dir),
+                "images": None if images_dir is None else str(images_dir),
+                "image": inputs["image"],
+                "seed": int(seed),
+            },
+            "paper": {"table2_color_box": duplicates.PAPER_TABLE2},
+            **metrics,
+        }
+        (Path(tmp) / "metrics.json").write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+    log.info(
+        "evaluate (duplicates): %s; wrote %s in %.1f s",
+        _duplicates_line(document),
+        out_dir,
+        time.perf_counter() - started,
+    )
+    return document
+
+
+def _duplicates_line(document: dict) -> str:
+    """The headline numbers of a duplicates evaluation, for the log."""
+    counts, after, mesh = document["counts"], document["poses"]["after"], document["mesh"]
+    parts = [
+        f"mean IoU {document['masks']['mean_iou']:.3f}",
+        f"registered {counts['registered']['after']} of {counts['truth']}",
+    ]
+    if after["rotation"] is not None:
+        error = after["rotation"]["error_deg"]
+        parts.append(f"rotation {error['mean']:.3f} deg mean, {error['median']:.3f} median")
+    if after["translation"] is not None:
+        parts.append(f"translation {after['translation']['error_fraction_of_diagonal']['mean']:.4f} of the diagonal")
+    if mesh is not None:
+        parts.append(f"Chamfer {mesh['chamfer_m']:.4g} m ({mesh['icp']['chamfer_m']:.4g} after ICP)")
+    return ", ".join(parts)
 
 
 def _seconds(timings: dict) -> str:
