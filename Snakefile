@@ -18,8 +18,9 @@ include: "workflow/rules/cameras.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/gradients.smk"
 include: "workflow/rules/milo.smk"
+include: "workflow/rules/segment.smk"
+include: "workflow/rules/duplicates.smk"
 include: "workflow/rules/bake.smk"
-include: "workflow/rules/truth_scene.smk"
 include: "workflow/rules/features.smk"
 include: "workflow/rules/render.smk"
 include: "workflow/rules/export.smk"
@@ -29,7 +30,6 @@ include: "workflow/rules/edit.smk"
 
 localrules:
     all,
-    truth_scene,
 
 
 rule all:

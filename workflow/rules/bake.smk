@@ -29,3 +29,39 @@ rule bake:
     shell:
         "invrender --log {log} bake --maps {input.maps} --training {input.training}"
         " --geometry {input.geometry} --cameras {input.cameras} --out {output}"
+
+
+rule bake_duplicates:
+    """A duplicates scene directory: the shared mesh (geometry stage) instanced at every recovered
+    pose (duplicates stage), seen by the photograph's camera, with a first-guess atlas (the
+    photograph's colours, until the material stage recovers albedo and light)."""
+    input:
+        geometry="results/{scene}/geometry",
+        duplicates="results/{scene}/duplicates",
+        cameras="results/{scene}/cameras",
+        segmentation=segmentation_dir,
+    output:
+        report(
+            directory("results/{scene}/scene"),
+            patterns=["{name}.json"],
+            caption="../report/bake.rst",
+            category="Scene",
+            labels={"scene": "{scene}", "file": "{name}.json"},
+        ),
+    log:
+        "results/{scene}/logs/bake.log",
+    benchmark:
+        "results/{scene}/benchmarks/bake.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern(DUPLICATES),
+    conda:
+        "../../envs/render.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        masks=instance_masks,
+    shell:
+        "invrender --log {log} bake --poses {input.duplicates}/poses.json --masks {params.masks:q}"
+        " --geometry {input.geometry} --cameras {input.cameras} --out {output}"

@@ -20,6 +20,6 @@ rule cameras:
         runtime=10,
     params:
         source=capture_cameras,
-        images=lambda wildcards: os.path.join(capture_dir(wildcards), "images"),
+        options=cameras_options,
     shell:
-        "invrender --log {log} cameras {params.source:q} --out {output} --images {params.images:q}"
+        "invrender --log {log} cameras {params.source:q} --out {output} {params.options}"

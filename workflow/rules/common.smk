@@ -168,8 +168,8 @@ CAPTURES = [name for name in SCENES if not is_synthetic(name)]
 
 def scenes_pattern(names):
     """A wildcard constraint matching exactly these scenes (none: a pattern nothing matches), so
-    that two rules writing results/{scene}/scene/ (bake for multiview scenes, truth_scene for
-    the others) never compete for one scene."""
+    that two rules writing results/{scene}/scene/ (bake for multiview scenes, bake_duplicates
+    for duplicates scenes) never compete for one scene."""
     return "|".join(re.escape(name) for name in names) or "(?!)"
 
 
@@ -509,29 +509,36 @@ _check_features()
 # ---------------------------------------------------------------------------- targets
 
 
+def lens(scene):
+    """A photograph's field_of_view or focal_length key, if its capture gives one instead of
+    cameras (the cameras rule then makes its one camera)."""
+    capture = SCENES[scene].get("capture", {})
+    return next((key for key in ("field_of_view", "focal_length") if key in capture), None)
+
+
 def has_cameras(scene):
-    if is_synthetic(scene):
+    if is_synthetic(scene) or lens(scene):
         return True
     return cameras_file(SCENES[scene]["capture"]["path"]) is not None
 
 
 def has_mesh(scene):
-    """A synthetic capture has mesh.ply whatever its mode; of the users' captures, multiview
-    ones (checked above)."""
-    return is_synthetic(scene) or mode(scene) == "multiview"
+    """A multiview scene brings its mesh (a synthetic capture its scan); a duplicates scene's is
+    recovered from its photograph (duplicates/object.ply)."""
+    return mode(scene) in ("multiview", "duplicates")
 
 
 _check_device()
 
 
 def recovers(scene):
-    """A multiview scene is recovered by MILO-Net (milo_train, bake); a synthetic scene of
-    another mode still has its truth copied into place (truth_scene) until its stages land.
-    """
-    return mode(scene) == "multiview"
+    """The modes whose stages have landed: multiview (milo_train, bake) and duplicates (segment,
+    duplicates, geometry, bake_duplicates). A room scene waits for issue 16."""
+    return mode(scene) in ("multiview", "duplicates")
 
 
-MULTIVIEW = [name for name in SCENES if recovers(name)]
+MULTIVIEW = [name for name in SCENES if mode(name) == "multiview"]
+DUPLICATES = [name for name in SCENES if mode(name) == "duplicates"]
 
 
 def scene_targets(scene):
@@ -540,11 +547,19 @@ def scene_targets(scene):
     targets = [f"{results}/capture"] if is_synthetic(scene) else []
     if has_cameras(scene):
         targets.append(f"{results}/cameras")
-    if has_mesh(scene):
-        targets += [f"{results}/geometry", f"{results}/gradients"]
-    if recovers(scene):
-        targets.append(f"{results}/milo/weights.pt")
-    if recovers(scene) or is_synthetic(scene):
+    if mode(scene) == "multiview":
+        targets += [
+            f"{results}/geometry",
+            f"{results}/gradients",
+            f"{results}/milo/weights.pt",
+        ]
+    if mode(scene) == "duplicates" and has_cameras(scene):
+        targets += [
+            f"{results}/segmentation",
+            f"{results}/duplicates",
+            f"{results}/geometry",
+        ]
+    if recovers(scene) and has_cameras(scene):
         targets += [
             f"{results}/scene",
             f"{results}/features.json",
@@ -605,6 +620,8 @@ def _lacks(wildcards, what):
 
 def geometry_mesh(wildcards):
     """The mesh that geometry reads (a synthetic capture's mesh.ply, or the user's)."""
+    if mode(wildcards.scene) == "duplicates":
+        return f"results/{wildcards.scene}/duplicates/object.ply"
     if is_synthetic(wildcards.scene):
         return os.path.join(capture_dir(wildcards), "mesh.ply")
     if not has_mesh(wildcards.scene):
@@ -613,6 +630,8 @@ def geometry_mesh(wildcards):
 
 
 def geometry_mesh_input(wildcards):
+    if mode(wildcards.scene) == "duplicates":
+        return f"results/{wildcards.scene}/duplicates"
     if is_synthetic(wildcards.scene):
         return capture_dir(wildcards)
     return geometry_mesh(wildcards)
@@ -622,6 +641,8 @@ def capture_cameras(wildcards):
     """The capture's cameras: a COLMAP model directory or a transforms.json file."""
     if is_synthetic(wildcards.scene):
         return os.path.join(capture_dir(wildcards), "sparse")
+    if lens(wildcards.scene):
+        return str(photograph(wildcards.scene))
     if not has_cameras(wildcards.scene):
         _lacks(
             wildcards, "cameras (sparse/ or transforms.json, the cameras rule's input)"
@@ -629,34 +650,27 @@ def capture_cameras(wildcards):
     return os.path.join(capture_dir(wildcards), cameras_file(capture_dir(wildcards)))
 
 
+def photograph(scene):
+    """The one photograph of a duplicates or room capture."""
+    capture = SCENES[scene]["capture"]
+    if "image" in capture:
+        return Path(capture["path"], capture["image"])
+    return photographs(Path(capture["path"], "images"))[0]
+
+
+def cameras_options(wildcards):
+    """The cameras rule's flags: a photograph's lens, else the images folder the model names."""
+    key = lens(wildcards.scene)
+    if key:
+        value = SCENES[wildcards.scene]["capture"][key]
+        return f"--{key.replace('_', '-')} {value}"
+    return f"--images {shlex.quote(os.path.join(capture_dir(wildcards), 'images'))}"
+
+
 def capture_cameras_input(wildcards):
     if is_synthetic(wildcards.scene):
         return capture_dir(wildcards)
     return capture_cameras(wildcards)
-
-
-def synthetic_capture(wildcards):
-    """truth_scene's input: the synthetic capture whose ground_truth/ it copies. A capture of
-    the user's own has no truth: its scene directory waits for the stage that recovers it.
-    """
-    scene = wildcards.scene
-    if not is_synthetic(scene):
-        raise WorkflowError(
-            f"scene {scene!r} is a {mode(scene)} capture of your own: nothing writes "
-            f"results/{scene}/scene/ yet (truth_scene copies the ground truth of synthetic "
-            f"scenes only); once its stages land, {planned(scene)}"
-        )
-    return capture_dir(wildcards)
-
-
-def truth_files(wildcards):
-    """What truth_scene copies into results/{scene}/scene/: the true scene directory's
-    contents, and for duplicates the true poses of the copies."""
-    truth = os.path.join(synthetic_capture(wildcards), "ground_truth")
-    files = [os.path.join(truth, "scene", ".")]
-    if mode(wildcards.scene) == "duplicates":
-        files.append(os.path.join(truth, "poses.json"))
-    return files
 
 
 # ---------------------------------------------------------------------------- params
@@ -711,16 +725,13 @@ def geometry_options(wildcards):
 
 
 def export_options(wildcards):
-    """invrender export's flags: --usdc, --no-instancing, and the poses of duplicates, which the
-    scene directory holds beside scene.json."""
+    """invrender export's flags: --usdc, --no-instancing. (A duplicates scene is a v2 scene: its
+    copies are objects sharing one mesh, which the export instances.)"""
     options = []
     if config["export"]["usdc"]:
         options.append("--usdc")
     if not config["export"]["instancing"]:
         options.append("--no-instancing")
-    if mode(wildcards.scene) == "duplicates":  # the poses of its copies (DESIGN.md)
-        poses = f"results/{wildcards.scene}/scene/poses.json"
-        options.append(f"--poses {shlex.quote(poses)}")
     return " ".join(options)
 
 

@@ -40,3 +40,40 @@ rule evaluate:
         " --atlas {input.geometry}/atlas.npz --images {input.cameras}/images --out {output}"
         " --snapshots results/{wildcards.scene}/milo/snapshots {params.holdout}"
         " --spp {params.spp} --seed {params.seed} {params.device}"
+
+
+rule evaluate_duplicates:
+    """A recovered duplicates scene against the synthetic truth: mask IoU, instances registered,
+    rotation error (a can's twist about its axis apart) and translation error after a similarity
+    alignment, before and after render-and-compare, and the shared mesh's Chamfer distance."""
+    input:
+        segmentation=segmentation_dir,
+        duplicates="results/{scene}/duplicates",
+        capture="results/{scene}/capture",
+    output:
+        report(
+            directory("results/{scene}/report"),
+            patterns=["{figure}.png"],
+            caption="../report/report_duplicates.rst",
+            category="Evaluation",
+            subcategory="{scene}",
+            labels={"scene": "{scene}", "figure": "{figure}"},
+        ),
+    log:
+        "results/{scene}/logs/evaluate.log",
+    benchmark:
+        "results/{scene}/benchmarks/evaluate.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern([name for name in DUPLICATES if name in SYNTHETIC]),
+    conda:
+        "../../envs/geometry.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=20,
+    params:
+        seed=config["evaluate"]["seed"],
+    shell:
+        "invrender --log {log} evaluate --duplicates {input.duplicates}"
+        " --segmentation {input.segmentation} --truth {input.capture}/ground_truth"
+        " --images {input.capture}/images --out {output} --seed {params.seed}"
