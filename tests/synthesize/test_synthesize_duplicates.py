@@ -423,3 +423,38 @@ def test_box_object_and_its_baked_print(presets):
     means = np.array(means)
     d = np.linalg.norm(means[:, None] - means[None], axis=-1) + np.eye(6)
     assert d.min() > 0.05
+
+
+@pytest.mark.parametrize("preset", ["box-6-ci", "can-6-ci"])
+def test_rendered_masks_hold_every_copy(tmp_path, preset):
+    """Through the synthesize stage with the OpenCL renderer: each copy's id covers the inside
+    of its projected outline (the convex hull of its projected vertices: the objects are
+    convex) and nothing outside it; a copy that no other hides covers all of it; both copies
+    of a touching pair show and share a border."""
+    from scipy.ndimage import binary_dilation
+
+    from invrender.scene.images import read_mask
+    from invrender.synthesize import run as synthesize
+
+    meta = synthesize("duplicates", tmp_path / "capture", {"preset": preset, "atlas_resolution": 128}, spp=2)
+    ids = read_mask(tmp_path / "capture" / "ground_truth" / "masks" / "view_000.png")
+    scene, again = make_duplicates(meta["config"])
+    assert again["poses"] == meta["poses"]
+    cam = scene.cameras[0]
+    assert ids.shape == (cam.height, cam.width) == (240, 320)
+    ys, xs = np.mgrid[0 : cam.height, 0 : cam.width]
+    centres = np.stack([xs.ravel() + 0.5, ys.ravel() + 0.5], 1)
+    outlines = []
+    for copy in meta["copies"]:
+        hull = ConvexHull(project_points(cam, copy_vertices(scene, copy)))
+        inside = (centres @ hull.equations[:, :2].T + hull.equations[:, 2]).max(1) <= 0
+        outlines.append((inside.reshape(ids.shape), hull.volume, hull.area))  # 2-d: area, perimeter
+    for k, (copy, (inside, area, perimeter)) in enumerate(zip(meta["copies"], outlines)):
+        mine = ids == copy["instance_id"]
+        assert not (mine & ~binary_dilation(inside)).any(), copy["instance_id"]
+        hidden = any((inside & other).any() for j, (other, _, _) in enumerate(outlines) if j != k)
+        assert mine.sum() <= area + perimeter / 2
+        assert mine.sum() >= (0.5 * area if hidden else area - perimeter / 2), copy["instance_id"]
+    assert len(meta["touching"]) == 2
+    for a, b in meta["touching"]:
+        assert (binary_dilation(ids == a) & (ids == b)).sum() >= 5, (a, b)
