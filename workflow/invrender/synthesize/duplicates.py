@@ -50,6 +50,7 @@ __all__ = [
     "build_object",
     "object_mesh",
     "convex_gap",
+    "ConvexShape",
     "POSES_CONVENTION",
 ]
 
