@@ -19,6 +19,8 @@ import numpy as np
 __all__ = [
     "Primitive",
     "BOX_SIDES",
+    "CYLINDER_PARTS",
+    "PLANE_AXES",
     "axis_grid",
     "grid_quad",
     "quad",
@@ -70,7 +72,7 @@ def _drop_unused(positions: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
 
 
 # In-plane axes (a, b) of a grid normal to each axis, with e_a x e_b = +e_axis.
-_PLANE_AXES = {0: (1, 2), 1: (2, 0), 2: (0, 1)}
+PLANE_AXES = {0: (1, 2), 1: (2, 0), 2: (0, 1)}
 
 
 def axis_grid(
@@ -91,7 +93,7 @@ def axis_grid(
     a, b = np.asarray(breaks_a, np.float64), np.asarray(breaks_b, np.float64)
     if np.any(np.diff(a) <= 0) or np.any(np.diff(b) <= 0):
         raise ValueError("axis_grid: breaks must be strictly increasing")
-    ia, ib = _PLANE_AXES[axis]
+    ia, ib = PLANE_AXES[axis]
     A, B = np.meshgrid(a, b, indexing="ij")
     pos = np.empty((A.size, 3))
     pos[:, axis], pos[:, ia], pos[:, ib] = value, A.ravel(), B.ravel()
@@ -152,7 +154,7 @@ def box(lo, hi, cell: float | None = None, omit=(), extra_breaks=((), (), ())) -
         if name in omit:
             continue
         axis, facing = "xyz".index(name[1]), (1 if name[0] == "+" else -1)
-        ia, ib = _PLANE_AXES[axis]
+        ia, ib = PLANE_AXES[axis]
         value = hi[axis] if facing > 0 else lo[axis]
         g = axis_grid(axis, value, facing, breaks[ia], breaks[ib])
         pieces.append(Primitive(g.positions, g.faces, np.full(len(g.faces), side, np.int32)))
