@@ -41,7 +41,8 @@ __all__ = ["RefineResult", "refine_poses", "project", "rasterise_silhouette", "s
 SUPERSAMPLE = 4  # sub-pixels per pixel side: coverage in steps of 1/16
 SHIFT = 4  # fractional bits of the vertex positions cv2.fillConvexPoly is given
 ERODE = np.ones((2, 2), np.uint8)
-STEP_PX = 0.5  # finite-difference step: a parameter unit is one pixel at the rim
+STEP_PX = 0.5
+DAMPING = 0.02  # per pixel of motion: a pixel costs 4e-4, a silhouette off by a pixel ~1e-2  # finite-difference step: a parameter unit is one pixel at the rim
 
 
 @dataclass
@@ -179,12 +180,20 @@ def _boxes(ids: np.ndarray) -> dict[int, tuple[int, int, int, int]]:
     return out
 
 
+def _front_faces(mesh: Mesh, T: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The faces in front of the camera that face it: a closed mesh's silhouette is the union of
+    these alone (half the triangles to fill)."""
+    p = mesh.positions @ T[:3, :3].T + T[:3, 3]
+    a, b, c = (p[mesh.faces[:, k]] for k in range(3))
+    facing = np.einsum("ij,ij->i", np.cross(b - a, c - a), a) < 0
+    return mesh.faces[facing & np.all(z[mesh.faces] > 1e-9, axis=1)]
+
+
 def _silhouette_residual(mesh: Mesh, target: _Target, T: np.ndarray) -> tuple[np.ndarray, float]:
     """Per working pixel, (coverage - mask) where no other instance is seen, scaled so its
     squared sum is the soft symmetric difference over the mask's area; and 1 - soft IoU."""
     uv, z = project(target.K, T, mesh.positions)
-    faces = mesh.faces[np.all(z[mesh.faces] > 1e-9, axis=1)]
-    S = rasterise_silhouette(uv, faces, target.shape)
+    S = rasterise_silhouette(uv, _front_faces(mesh, T, z), target.shape)
     M, w = target.mask, target.weight
     inter = (w * S * M).sum()
     union = (w * (S + M - S * M)).sum()
@@ -201,26 +210,45 @@ class _Appearance:
     ids: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    chromaticity: bool = True
+    luminance: float = 0.3
+    min_cos: float = 0.3  # grazing points: their pixels mix the object's edge with what is behind
+
+    def __post_init__(self):
+        # The id image where a pixel's 3 x 3 neighbourhood is one instance; 0 elsewhere.
+        lo = cv2.erode(self.ids.astype(np.float32), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        hi = cv2.dilate(self.ids.astype(np.float32), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        self.core = np.where(lo == hi, self.ids, 0)
+
+    def facing(self, T: np.ndarray) -> np.ndarray:
+        """The points that face the camera at pose T by more than ``min_cos``."""
+        p = self.points @ T[:3, :3].T + T[:3, 3]
+        n = self.normals @ T[:3, :3].T
+        return -np.einsum("ij,ij->i", n, p) > self.min_cos * np.linalg.norm(p, axis=1)
 
     def colours(self, K: np.ndarray, T: np.ndarray, instance_id: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Colours (S, 3) of the surface points seen at pose T, divided by their mean (a gain per
         instance: the copies are lit from different angles); ``seen`` (S,) where the point faces
         the camera and the id image shows this instance; ``hidden`` (S,) where it faces the camera
         but another instance is in front."""
-        R, t = T[:3, :3], T[:3, 3]
-        p = self.points @ R.T + t
-        facing = np.einsum("ij,ij->i", self.normals @ R.T, p) < 0
+        facing = self.facing(T)
         uv, _ = project(K, T, self.points)
         H, W = self.ids.shape
         inside = facing & np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0)
         inside &= (uv[:, 0] < W) & (uv[:, 1] < H)
         xy = np.where(inside[:, None], uv, 0.5)
         seen_id = self.ids[xy[:, 1].astype(int), xy[:, 0].astype(int)]
-        seen = inside & (seen_id == instance_id)
+        # Seen: well inside the instance's mask, not on its border where the photo blends it
+        # with what is around it.
+        seen = inside & (seen_id == instance_id) & (self.core[xy[:, 1].astype(int), xy[:, 0].astype(int)] == instance_id)
         hidden = inside & (seen_id != instance_id) & (seen_id != 0)
         grid = (xy - 0.5).astype(np.float32)  # array index of a pixel centre
         col = cv2.remap(self.image, grid[:, 0:1], grid[:, 1:2], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         col = col.reshape(-1, 3).astype(np.float64)
+        if self.chromaticity:
+            total = col.sum(axis=1, keepdims=True)
+            lum = total / max(total[seen].mean() if seen.sum() >= 8 else total.mean(), 1e-6)
+            return np.concatenate([col / np.maximum(total, 1e-6), self.luminance * lum], axis=1), seen, hidden
         gain = col[seen].mean(axis=0) if seen.sum() >= 8 else np.maximum(col.mean(axis=0), 1e-6)
         return col / np.maximum(gain, 1e-6), seen, hidden
 
@@ -234,7 +262,7 @@ class _Appearance:
             col, seen, _ = self.colours(K, T, j)
             stack.append(np.where(seen[:, None], col, np.nan))
         if not stack:
-            return np.full((len(self.points), 3), np.nan)
+            return np.full((len(self.points), 4 if self.chromaticity else 3), np.nan)
         with np.errstate(all="ignore"):
             import warnings
 
@@ -247,9 +275,7 @@ class _Appearance:
         camera and is not hidden by another instance (on the background it counts: a wrong
         pose shows floor there); over sqrt(S) so the squared sum is a mean."""
         col, _, hidden = self.colours(K, T, instance_id)
-        p = self.points @ T[:3, :3].T + T[:3, 3]
-        facing = np.einsum("ij,ij->i", self.normals @ T[:3, :3].T, p) < 0
-        use = facing & ~hidden & np.all(np.isfinite(reference), axis=1)
+        use = self.facing(T) & ~hidden & np.all(np.isfinite(reference), axis=1)
         diff = np.where(use[:, None], col - np.nan_to_num(reference), 0.0)
         return diff.ravel() / np.sqrt(len(self.points))
 
@@ -305,15 +331,22 @@ class _Problem:
             last = {}
 
             def fun(x, T=T, level=level):
-                last["x"], last["f"] = x.copy(), self.residual(self.pose(T, x, level), level)[0]
+                # A weak pull towards where the level started keeps what the residuals cannot
+                # see (a can's turn about its axis, under silhouettes alone) where it was.
+                f = np.concatenate([self.residual(self.pose(T, x, level), level)[0], DAMPING * x])
+                last["x"], last["f"] = x.copy(), f
                 return last["f"]
 
             def jac(x, T=T, level=level):
                 f0 = last["f"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
-                columns = [self.residual(self.pose(T, x + STEP_PX * e, level), level)[0] - f0 for e in np.eye(6)]
+                columns = [
+                    np.concatenate([self.residual(self.pose(T, x + STEP_PX * e, level), level)[0], DAMPING * (x + STEP_PX * e)])
+                    - f0
+                    for e in np.eye(6)
+                ]
                 return np.stack(columns, axis=1) / STEP_PX
 
-            sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", max_nfev=iterations, x_scale=1.0)
+            sol = least_squares(fun, np.zeros(6), jac=jac, method="lm", max_nfev=iterations)
             T = self.pose(T, sol.x, level)
         return T
 
@@ -337,8 +370,8 @@ def _place(problem: _Problem, R: np.ndarray, depth: float, level: int) -> np.nda
     aim = centroid
     for _ in range(3):  # again: perspective moves the drawn centroid off the aimed ray
         T[:3, 3] = depth * (Kinv @ [*aim, 1.0])
-        uv, _ = project(target.K, T, problem.mesh.positions)
-        S = rasterise_silhouette(uv, problem.mesh.faces, target.shape)
+        uv, z = project(target.K, T, problem.mesh.positions)
+        S = rasterise_silhouette(uv, _front_faces(problem.mesh, T, z), target.shape)
         if S.sum() < 1e-6:
             break
         depth *= np.sqrt(S.sum() / max(M.sum(), 1e-9))  # area goes as 1 / depth^2
@@ -346,6 +379,38 @@ def _place(problem: _Problem, R: np.ndarray, depth: float, level: int) -> np.nda
         aim = aim - (drawn - centroid)
     T[:3, 3] = depth * (Kinv @ [*aim, 1.0])
     return T
+
+
+def _axis_sweep(problem: _Problem, T: np.ndarray, degrees, level: int = 0) -> np.ndarray:
+    """The best of T and T turned about each of its object axes by each of ``degrees``, by
+    cost: a turn the silhouette cannot see (a can about its axis) is found by the photometric
+    term only, whose basin is narrower than a borrowed rotation's error and rough (the label's
+    texels, the render's noise), so least squares alone stops in it short of the truth."""
+    best, best_cost = T, problem.cost(T, level)[0]
+    for axis in np.eye(3):
+        for angle in degrees:
+            turned = T.copy()
+            turned[:3, :3] = T[:3, :3] @ Rotation.from_rotvec(axis * np.radians(angle)).as_matrix()
+            cost = problem.cost(turned, level)[0]
+            if cost < best_cost:
+                best, best_cost = turned, cost
+    return best
+
+
+FULL_TURN = np.arange(30, 360, 30)  # degrees: re-initialisation
+NEAR_TURN = np.array([-15, -10, -6, -3, 3, 6, 10, 15])  # degrees: after a local refinement
+
+
+def _flip_is_better(problem: _Problem, T: np.ndarray, ratio: float = 0.8) -> bool:
+    """Whether a 180-degree turn of T about one of its object axes costs clearly less."""
+    cost = problem.cost(T)[0]
+    return any(problem.cost(_turned(T, F))[0] < ratio * cost for F in FLIPS)
+
+
+def _turned(T: np.ndarray, R_obj: np.ndarray) -> np.ndarray:
+    out = T.copy()
+    out[:3, :3] = T[:3, :3] @ R_obj
+    return out
 
 
 def _candidates(rotations: list[np.ndarray], tolerance_deg: float = 10.0) -> list[np.ndarray]:
@@ -393,7 +458,7 @@ def refine_poses(
     unregistered=(),
     *,
     levels=(24, 64),
-    margin: float = 0.5,
+    margin: float = 0.3,
     photometric_weight: float = 1.0,
     iterations: int = 10,
     outlier_factor: float = 3.0,
@@ -426,26 +491,38 @@ def refine_poses(
     log: list[str] = []
     all_levels = range(len(levels))
 
-    def problem(i, trusted) -> _Problem:
+    def problem(i, trusted, weight=photometric_weight) -> _Problem:
         reference = app.reference(K, {j: current[j] for j in trusted if j != i}, i)
-        return _Problem(shape, K, targets[i], app, reference, photometric_weight, i)
+        return _Problem(shape, K, targets[i], app, reference, weight, i)
 
     def costs(trusted) -> dict[int, tuple[float, float]]:
         return {i: problem(i, trusted).cost(current[i]) for i in current}
 
+    def sweep(instances, trusted, weight) -> None:
+        """Gauss-Seidel: each instance refined against the others' latest poses."""
+        for i in instances:
+            start = time.perf_counter()
+            p = problem(i, trusted, weight)
+            current[i] = p.refine(current[i], all_levels, iterations)
+            if weight > 0:
+                current[i] = p.refine(_axis_sweep(p, current[i], NEAR_TURN, -1), all_levels[-1:], iterations)
+            evaluations[i] += p.evaluations
+            seconds[i] += time.perf_counter() - start
+
     before = costs(registered)
-    for i in registered:  # Gauss-Seidel: each instance against the others' latest poses
-        start = time.perf_counter()
-        p = problem(i, registered)
-        current[i] = p.refine(current[i], all_levels, iterations)
-        evaluations[i] += p.evaluations
-        seconds[i] += time.perf_counter() - start
+    # Silhouettes first: they fix position, depth and tilt; the photometric term compares with
+    # the other instances, so it is only as good as their poses.
+    sweep(registered, registered, 0.0)
+    sweep(registered, registered, photometric_weight)
     refined = costs(registered)
     median = float(np.median([c for c, _ in refined.values()]))
     threshold = max(outlier_factor * median, outlier_floor)
-    wrong = [i for i in registered if refined[i][0] > threshold]
+    # A can flipped end over end has its silhouette: its residual may not stand out, but its
+    # flip back costs less.
+    flipped = [i for i in registered if _flip_is_better(problem(i, registered), current[i])]
+    wrong = [i for i in registered if refined[i][0] > threshold or i in flipped]
     trusted = [i for i in registered if i not in wrong] or registered
-    log.append(f"residual median {median:.4f}, threshold {threshold:.4f}: wrong {wrong}")
+    log.append(f"residual median {median:.4f}, threshold {threshold:.4f}, flips better: {flipped}: wrong {wrong}")
 
     for i in wrong + unregistered:
         start = time.perf_counter()
@@ -459,10 +536,13 @@ def refine_poses(
             scored.append(current[i])
         results = [p.refine(T, all_levels, iterations) for T in scored]
         best = min(results, key=lambda T: p.cost(T)[0])
+        best = p.refine(_axis_sweep(p, best, FULL_TURN), all_levels, iterations)
         current[i] = best
         evaluations[i] += p.evaluations
         seconds[i] += time.perf_counter() - start
         log.append(f"instance {i}: {len(rotations)} candidate rotations, best cost {p.cost(best)[0]:.4f}")
+    # Once more, every instance against the corrected ones.
+    sweep(registered + unregistered, trusted + wrong + unregistered, photometric_weight)
 
     after = costs(trusted + wrong + unregistered)
     nan = (float("nan"), float("nan"))
