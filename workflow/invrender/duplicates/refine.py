@@ -401,7 +401,7 @@ FULL_TURN = np.arange(30, 360, 30)  # degrees: re-initialisation
 NEAR_TURN = np.array([-15, -10, -6, -3, 3, 6, 10, 15])  # degrees: after a local refinement
 
 
-def _flip_is_better(problem: _Problem, T: np.ndarray, ratio: float = 0.8) -> bool:
+def _flip_is_better(problem: _Problem, T: np.ndarray, ratio: float = 0.5) -> bool:
     """Whether a 180-degree turn of T about one of its object axes costs clearly less."""
     cost = problem.cost(T)[0]
     return any(problem.cost(_turned(T, F))[0] < ratio * cost for F in FLIPS)
