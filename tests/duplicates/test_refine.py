@@ -103,6 +103,22 @@ def errors(T, G):
     return np.degrees(Q.magnitude()), swing, min(twist, 360 - twist), abs(T[2, 3] / G[2, 3] - 1)
 
 
+def frame_alignment(estimates: dict, truth: dict) -> np.ndarray:
+    """The object-frame rotation A that best maps estimated onto true rotations (R_est A ~ R_true)
+    by the median angle, among each instance's own: the can is symmetric about its axis, so a
+    turn of every copy by the same angle about it is a change of the object frame, not an
+    error (evaluate/duplicates aligns frames the same way)."""
+    candidates = [estimates[i][:3, :3].T @ truth[i][:3, :3] for i in estimates]
+
+    def spread(A):
+        return np.median([Rotation.from_matrix(truth[i][:3, :3].T @ estimates[i][:3, :3] @ A).magnitude() for i in estimates])
+
+    A = min(candidates, key=spread)
+    out = np.eye(4)
+    out[:3, :3] = A
+    return out
+
+
 def perturbed(T, rng, degrees=5.0, depth=0.05):
     axis = rng.normal(size=3)
     out = T.copy()
@@ -126,6 +142,9 @@ def refined(capture):
     result = refine_poses(capture["mesh"], capture["K"], capture["ids"], capture["image"], poses, [UNREGISTERED])
     seconds = time.perf_counter() - start
     print(f"\nrefine_poses: {seconds:.1f} s for {len(truth)} cans; {result.log}")
+    A = frame_alignment(result.poses, truth)
+    result.poses = {i: T @ A for i, T in result.poses.items()}
+    print("common turn of the object frame (deg):", np.degrees(Rotation.from_matrix(A[:3, :3]).magnitude()))
     for i, G in truth.items():
         b = errors(poses[i], G) if i in poses else (np.nan,) * 4
         a = errors(result.poses[i], G)

@@ -211,7 +211,7 @@ class _Appearance:
     points: np.ndarray
     normals: np.ndarray
     chromaticity: bool = True
-    luminance: float = 0.3
+    luminance: float = 0.0
     min_cos: float = 0.3  # grazing points: their pixels mix the object's edge with what is behind
 
     def __post_init__(self):
@@ -271,13 +271,15 @@ class _Appearance:
                 return np.nanmedian(np.stack(stack), axis=0)
 
     def residual(self, K: np.ndarray, T: np.ndarray, instance_id: int, reference: np.ndarray) -> np.ndarray:
-        """(S * 3,) colour differences to the reference where this instance's point faces the
+        """(S * C,) colour differences to the reference where this instance's point faces the
         camera and is not hidden by another instance (on the background it counts: a wrong
-        pose shows floor there); over sqrt(S) so the squared sum is a mean."""
+        pose shows floor there), scaled so the squared sum is a mean over those points."""
         col, _, hidden = self.colours(K, T, instance_id)
         use = self.facing(T) & ~hidden & np.all(np.isfinite(reference), axis=1)
         diff = np.where(use[:, None], col - np.nan_to_num(reference), 0.0)
-        return diff.ravel() / np.sqrt(len(self.points))
+        # A mean over the points compared, not over all: a pose that turns towards the camera
+        # points no other instance shows (no reference) must not look better for it.
+        return diff.ravel() / np.sqrt(max(use.sum(), len(self.points) / 20))
 
 
 # --- the optimiser --------------------------------------------------------------------------
@@ -401,10 +403,28 @@ FULL_TURN = np.arange(30, 360, 30)  # degrees: re-initialisation
 NEAR_TURN = np.array([-15, -10, -6, -3, 3, 6, 10, 15])  # degrees: after a local refinement
 
 
-def _flip_is_better(problem: _Problem, T: np.ndarray, ratio: float = 0.5) -> bool:
-    """Whether a 180-degree turn of T about one of its object axes costs clearly less."""
-    cost = problem.cost(T)[0]
-    return any(problem.cost(_turned(T, F))[0] < ratio * cost for F in FLIPS)
+def _disagreement(app: _Appearance, K: np.ndarray, poses: dict[int, np.ndarray], least: int = 20) -> dict[int, float]:
+    """Per instance, the median over the others of the mean squared colour difference at the
+    surface points both see, at the best of small turns of this one about its axes (turns the
+    silhouettes left loose): a can flipped end over end disagrees with every right one, a right
+    one only with the wrong few. Compared pairwise, not with a median reference, because a
+    reference made from few instances takes in the wrong one's colours."""
+    seen = {i: app.colours(K, T, i)[:2] for i, T in poses.items()}
+    turns = [np.eye(3)] + [Rotation.from_rotvec(axis * np.radians(a)).as_matrix() for axis in np.eye(3) for a in NEAR_TURN]
+    out = {}
+    for i, T in poses.items():
+        turned = [app.colours(K, _turned(T, R), i)[:2] for R in turns]
+        pairs = []
+        for j, (col_j, seen_j) in seen.items():
+            costs = [
+                ((col_i[both] - col_j[both]) ** 2).sum(axis=1).mean()
+                for col_i, seen_i in turned
+                if (both := seen_i & seen_j).sum() >= least
+            ]
+            if j != i and costs:
+                pairs.append(float(min(costs)))
+        out[i] = float(np.median(pairs)) if pairs else float("nan")
+    return out
 
 
 def _turned(T: np.ndarray, R_obj: np.ndarray) -> np.ndarray:
@@ -463,6 +483,7 @@ def refine_poses(
     iterations: int = 10,
     outlier_factor: float = 3.0,
     outlier_floor: float = 0.05,
+    disagreement_factor: float = 2.5,
     refine_candidates: int = 3,
     samples: int = 1500,
     blur_px: float = 1.0,
@@ -511,18 +532,23 @@ def refine_poses(
 
     before = costs(registered)
     # Silhouettes first: they fix position, depth and tilt; the photometric term compares with
-    # the other instances, so it is only as good as their poses.
+    # the other instances, so it is only as good as their poses, and a wrong one (flipped)
+    # must be found before it drags the others' turns with it.
     sweep(registered, registered, 0.0)
-    sweep(registered, registered, photometric_weight)
     refined = costs(registered)
     median = float(np.median([c for c, _ in refined.values()]))
     threshold = max(outlier_factor * median, outlier_floor)
-    # A can flipped end over end has its silhouette: its residual may not stand out, but its
-    # flip back costs less.
-    flipped = [i for i in registered if _flip_is_better(problem(i, registered), current[i])]
+    # A can flipped end over end keeps its silhouette: its residual need not stand out, but its
+    # colours disagree with the others'.
+    disagreement = _disagreement(app, K, current)
+    typical = float(np.nanmedian(list(disagreement.values())))
+    flipped = [i for i in registered if disagreement[i] > disagreement_factor * typical]
     wrong = [i for i in registered if refined[i][0] > threshold or i in flipped]
     trusted = [i for i in registered if i not in wrong] or registered
-    log.append(f"residual median {median:.4f}, threshold {threshold:.4f}, flips better: {flipped}: wrong {wrong}")
+    log.append(
+        f"residual median {median:.4f}, threshold {threshold:.4f}; colour disagreement median {typical:.4f}, "
+        f"above {disagreement_factor} x: {flipped}; wrong {wrong}"
+    )
 
     for i in wrong + unregistered:
         start = time.perf_counter()
