@@ -114,6 +114,9 @@ def frame_alignment(estimates: dict, truth: dict) -> np.ndarray:
         return np.median([Rotation.from_matrix(truth[i][:3, :3].T @ estimates[i][:3, :3] @ A).magnitude() for i in estimates])
 
     A = min(candidates, key=spread)
+    # The mean of the candidates near it, back on SO(3): not one instance's own.
+    near = [C for C in candidates if Rotation.from_matrix(A.T @ C).magnitude() < np.radians(30)]
+    A = Rotation.from_matrix(np.array(near)).mean().as_matrix()
     out = np.eye(4)
     out[:3, :3] = A
     return out
@@ -162,21 +165,26 @@ def test_perturbed_cans_converge(capture, refined):
     ordinary = [i for i in poses if i != FLIPPED]
     swing = [errors(result.poses[i], capture["truth"][i])[1] for i in ordinary]
     depth = [errors(result.poses[i], capture["truth"][i])[3] for i in ordinary]
-    assert np.sum(np.array(swing) < 1.5) >= len(ordinary) - 1, swing
-    assert max(swing) < 3.0, swing
-    assert max(depth) < 0.01, depth
+    assert max(swing) < 1.5, swing  # measured 0.3 .. 1.3 degrees from 2 .. 4.3
+    assert max(depth) < 0.01, depth  # measured 0.06 .. 0.2 % from 5 %
     for i in ordinary:
         assert result.silhouette_after[i] < 0.5 * result.silhouette_before[i], i
         assert i not in result.reinitialised
 
 
-def test_a_flipped_can_does_not_spoil_the_others(capture, refined):
-    """Can 2 stays flipped end over end (its detection does not work yet, see
-    docs/duplicates-refine.md), but the median reference keeps the others converging (above)
-    and its own silhouette fits: a flip about its centre leaves a can's silhouette alone."""
+def test_flipped_can_is_detected_and_turned_back(capture, refined):
     _, result = refined
-    assert result.silhouette_after[FLIPPED] < 0.05
-    assert errors(result.poses[FLIPPED], capture["truth"][FLIPPED])[3] < 0.01
+    assert result.reinitialised == [FLIPPED]
+    _, swing, _, depth = errors(result.poses[FLIPPED], capture["truth"][FLIPPED])
+    assert swing < 3.0 and depth < 0.01  # measured 0.18 degrees, 0.22 %
+
+
+def test_turn_about_the_axis_is_found_by_the_label(capture, refined):
+    """The silhouettes cannot see a can's turn about its axis; the photometric term does,
+    coarsely (measured 0.7 .. 15 degrees, median 8; a guess would give a median of 90)."""
+    _, result = refined
+    twist = [errors(result.poses[i], G)[2] for i, G in capture["truth"].items()]
+    assert np.median(twist) < 15.0 and max(twist) < 30.0, twist
 
 
 def test_unregistered_can_gets_a_pose(capture, refined):
@@ -184,13 +192,15 @@ def test_unregistered_can_gets_a_pose(capture, refined):
     assert result.initialised == [UNREGISTERED]
     assert set(result.poses) == set(capture["truth"])
     _, swing, _, depth = errors(result.poses[UNREGISTERED], capture["truth"][UNREGISTERED])
-    assert swing < 3.0 and depth < 0.02
+    assert swing < 3.0 and depth < 0.01  # measured 0.3 degrees, 0.34 %
     assert np.isnan(result.residual_before[UNREGISTERED])
 
 
 def test_evaluations_stay_within_budget(refined):
     poses, result = refined
-    assert max(result.evaluations.values()) <= 600  # measured: 364 .. 503
+    fresh = set(result.reinitialised) | set(result.initialised)
+    assert max(n for i, n in result.evaluations.items() if i not in fresh) <= 400  # measured: 187 .. 277
+    assert max(result.evaluations.values()) <= 1000  # measured: 542 (unregistered), 673 (flipped)
 
 
 def test_bad_input_names_what_was_expected(capture):

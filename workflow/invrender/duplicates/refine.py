@@ -399,7 +399,7 @@ def _axis_sweep(problem: _Problem, T: np.ndarray, degrees, level: int = 0) -> np
     return best
 
 
-FULL_TURN = np.arange(30, 360, 30)  # degrees: re-initialisation
+FULL_TURN = np.arange(15, 360, 15)  # degrees: re-initialisation
 NEAR_TURN = np.array([-15, -10, -6, -3, 3, 6, 10, 15])  # degrees: after a local refinement
 
 
@@ -484,6 +484,7 @@ def refine_poses(
     outlier_factor: float = 3.0,
     outlier_floor: float = 0.05,
     disagreement_factor: float = 2.5,
+    photometric_passes: int = 1,
     refine_candidates: int = 3,
     samples: int = 1500,
     blur_px: float = 1.0,
@@ -568,7 +569,8 @@ def refine_poses(
         seconds[i] += time.perf_counter() - start
         log.append(f"instance {i}: {len(rotations)} candidate rotations, best cost {p.cost(best)[0]:.4f}")
     # Once more, every instance against the corrected ones.
-    sweep(registered + unregistered, trusted + wrong + unregistered, photometric_weight)
+    for _ in range(photometric_passes):
+        sweep(registered + unregistered, trusted + wrong + unregistered, photometric_weight)
 
     after = costs(trusted + wrong + unregistered)
     nan = (float("nan"), float("nan"))
