@@ -28,8 +28,12 @@ def cam_from_obj(cam: Camera, T_obj2world) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def capture():
-    """Six cans rendered at 320 x 240: the photo, the instance AOV and the true poses."""
-    scene, meta = make_duplicates({"camera": {"width": WIDTH, "height": HEIGHT}})
+    return make_capture()
+
+
+def make_capture(count: int = 6, seed: int = 0):
+    """Cans rendered at 320 x 240: the photo, the instance AOV and the true poses."""
+    scene, meta = make_duplicates({"count": count, "seed": seed, "camera": {"width": WIDTH, "height": HEIGHT}})
     cam = scene.cameras[0]
     out = _default_renderer(scene).render(cam, spp=16, seed=0)
     truth = {p["instance_id"]: cam_from_obj(cam, p["T_obj2world"]) for p in meta["poses"]["instances"]}
@@ -111,7 +115,9 @@ def frame_alignment(estimates: dict, truth: dict) -> np.ndarray:
     candidates = [estimates[i][:3, :3].T @ truth[i][:3, :3] for i in estimates]
 
     def spread(A):
-        return np.median([Rotation.from_matrix(truth[i][:3, :3].T @ estimates[i][:3, :3] @ A).magnitude() for i in estimates])
+        return np.median(
+            [Rotation.from_matrix(truth[i][:3, :3].T @ estimates[i][:3, :3] @ A).magnitude() for i in estimates]
+        )
 
     A = min(candidates, key=spread)
     # The mean of the candidates near it, back on SO(3): not one instance's own.
@@ -137,12 +143,25 @@ FLIPPED, UNREGISTERED = 2, 5
 def refined(capture):
     """Every can 5 degrees and 5 % in depth off its true pose, can 2 also flipped end over end,
     can 5 not registered: one refinement for all three cases (pytest -s prints the errors)."""
+    return run_refinement(capture)
+
+
+def run_refinement(capture, flipped=FLIPPED, unregistered=UNREGISTERED, **options):
     rng = np.random.default_rng(1)
     truth = capture["truth"]
-    poses = {i: perturbed(T, rng) for i, T in truth.items() if i != UNREGISTERED}
-    poses[FLIPPED] = poses[FLIPPED] @ np.diag([1.0, -1.0, -1.0, 1.0])
+    poses = {i: perturbed(T, rng) for i, T in truth.items() if i != unregistered}
+    if flipped:
+        poses[flipped] = poses[flipped] @ np.diag([1.0, -1.0, -1.0, 1.0])
     start = time.perf_counter()
-    result = refine_poses(capture["mesh"], capture["K"], capture["ids"], capture["image"], poses, [UNREGISTERED])
+    result = refine_poses(
+        capture["mesh"],
+        capture["K"],
+        capture["ids"],
+        capture["image"],
+        poses,
+        [unregistered] if unregistered else [],
+        **options,
+    )
     seconds = time.perf_counter() - start
     print(f"\nrefine_poses: {seconds:.1f} s for {len(truth)} cans; {result.log}")
     A = frame_alignment(result.poses, truth)
