@@ -8,8 +8,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from invrender.duplicates.refine import rasterise_silhouette, refine_poses, silhouette
+from invrender.render.analysis import analyse
+from invrender.render.renderer import Renderer, pixel_requests
 from invrender.scene.types import Camera, SceneError
-from invrender.synthesize.capture import _default_renderer
 from invrender.synthesize.duplicates import make_duplicates, object_mesh
 
 WIDTH, HEIGHT = 320, 240  # cans of about 50 x 30 pixels
@@ -35,7 +36,7 @@ def make_capture(count: int = 6, seed: int = 0):
     """Cans rendered at 320 x 240: the photo, the instance AOV and the true poses."""
     scene, meta = make_duplicates({"count": count, "seed": seed, "camera": {"width": WIDTH, "height": HEIGHT}})
     cam = scene.cameras[0]
-    out = _default_renderer(scene).render(cam, spp=16, seed=0)
+    out = Renderer(scene, analyse(scene)).render(cam, spp=16, seed=0)
     truth = {p["instance_id"]: cam_from_obj(cam, p["T_obj2world"]) for p in meta["poses"]["instances"]}
     return {
         "scene": scene,
@@ -76,9 +77,7 @@ def test_silhouette_matches_the_renderers_instance_aov(capture):
     s = 4
     (fx, fy), (cx, cy) = cam.focal, cam.principal_point
     fine = Camera(cam.name, "PINHOLE", WIDTH * s, HEIGHT * s, np.array([fx * s, fy * s, cx * s, cy * s]), cam.R, cam.t)
-    from invrender.render.renderer import pixel_requests
-
-    renderer = _default_renderer(scene)
+    renderer = Renderer(scene, analyse(scene))
     aov = renderer.aovs([fine], pixel_requests(fine))["instance_id"].reshape(HEIGHT * s, WIDTH * s)
 
     def pool(a):

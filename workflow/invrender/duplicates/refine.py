@@ -8,20 +8,23 @@ what the photo shows of that instance:
   window around its box; pixels of other instances are left out, as they may occlude it.
 - its pixels (photometric): what a silhouette cannot see (a can's turn about its axis, which end is
   up). Points spread over the mesh's surface are looked up in the photo through every *other*
-  instance's pose where the id image says that instance is seen; their median colour is the
-  shared appearance this instance's pixels must show at the same points.
+  instance's pose where the id image says that instance is seen; their median chromaticity is
+  the shared appearance this instance's pixels must show at the same points.
 
-The optimiser is scipy's least_squares on those residuals with finite differences, per instance,
-on 6 parameters all in pixels of motion at the object's rim (so one step size fits all): rotation
-about the object's centre in the camera frame, image-plane translation, and depth as a log scale
-of the translation. The mesh's scale is not refined: under one camera a shared scale of the mesh
-and of every translation renders the same image (a gauge), so the scale stays the mesh's.
+The optimiser is scipy's least_squares (Levenberg-Marquardt) on those residuals with forward
+differences, per instance, on 6 parameters all in pixels of motion at the object's rim (so one
+step size fits all): rotation about the object's centre in the camera frame, image-plane
+translation, and depth as a scaling of the translation along its ray. The mesh's scale is not
+refined: under one camera a shared scale of the mesh and of every translation renders the same
+image (a gauge), so the scale stays the mesh's.
 
-Registered-but-wrong instances (a can flipped end over end has the same silhouette) are found by
-their residual against the median of all instances', then re-initialised like the unregistered
-ones: candidates are the other instances' rotations placed at this instance's mask centroid and
-at the depth its mask's size implies, plus 180-degree turns about its own object axes; each is
-scored, the best few refined, the best kept.
+Order: silhouettes alone first; then the registered-but-wrong instances are found, by their
+residual against the median of all or by their colours disagreeing with the others' (a can
+flipped end over end has the same silhouette), and re-initialised like the unregistered ones:
+candidates are the trusted instances' rotations placed at this instance's mask centroid and at
+the depth its mask's size implies, plus 180-degree turns about their object axes; each is scored,
+the best few refined, the winner searched in turns about its axes; last, one photometric sweep
+over all. docs/duplicates-refine.md has the measurements behind these choices.
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ class RefineResult:
     residual_after: dict[int, float]
     silhouette_before: dict[int, float]  # 1 - soft IoU, the geometric part of the residual
     silhouette_after: dict[int, float]
-    reinitialised: list[int]  # registered, found wrong by their residual, re-initialised
+    reinitialised: list[int]  # registered, found wrong (residual or colours), re-initialised
     initialised: list[int]  # not registered: posed by refinement, not by COLMAP
     evaluations: dict[int, int]  # residual evaluations spent per instance
     seconds: dict[int, float]
@@ -316,8 +319,8 @@ class _Problem:
         return T
 
     def refine(self, T0: np.ndarray, levels, iterations: int) -> np.ndarray:
-        """Gauss-Newton steps (scipy's trust-region least squares) at each level in turn, coarse
-        to fine, re-centred at every level. Forward differences of half a working pixel: the
+        """Levenberg-Marquardt steps (scipy's least_squares) at each level in turn, coarse to
+        fine, re-centred at every level. Forward differences of half a working pixel: the
         coverage moves in steps of 1/16 of a pixel, so an infinitesimal step sees nothing."""
         T = T0
         for level in levels:
@@ -384,8 +387,7 @@ def _axis_sweep(problem: _Problem, T: np.ndarray, degrees, level: int = 0) -> np
     best, best_cost = T, problem.cost(T, level)[0]
     for axis in np.eye(3):
         for angle in degrees:
-            turned = T.copy()
-            turned[:3, :3] = T[:3, :3] @ Rotation.from_rotvec(axis * np.radians(angle)).as_matrix()
+            turned = _turned(T, Rotation.from_rotvec(axis * np.radians(angle)).as_matrix())
             cost = problem.cost(turned, level)[0]
             if cost < best_cost:
                 best, best_cost = turned, cost
