@@ -174,6 +174,17 @@ def _target(ids: np.ndarray, K: np.ndarray, instance_id: int, box, max_side: int
     return _Target(instance_id, Kw, own, 1.0 - other, n)
 
 
+def _levels(ids, K, instance_id: int, box, sides, margin: float) -> list[_Target]:
+    """The instance's targets coarse to fine, one per distinct working resolution: a box smaller
+    than a level's side is seen at full resolution once, not again at every finer level."""
+    out: list[_Target] = []
+    for side in sides:
+        target = _target(ids, K, instance_id, box, side, margin)
+        if not out or target.n != out[-1].n:
+            out.append(target)
+    return out
+
+
 def _boxes(ids: np.ndarray) -> dict[int, tuple[int, int, int, int]]:
     out = {}
     for i in np.unique(ids):
@@ -319,6 +330,7 @@ class _Problem:
         return T
 
     def refine(self, T0: np.ndarray, levels, iterations: int) -> np.ndarray:
+        levels = range(len(self.targets)) if levels is None else levels
         """Levenberg-Marquardt steps (scipy's least_squares) at each level in turn, coarse to
         fine, re-centred at every level. Forward differences of half a working pixel: the
         coverage moves in steps of 1/16 of a pixel, so an infinitesimal step sees nothing."""
@@ -480,7 +492,7 @@ def refine_poses(
     poses: dict[int, np.ndarray],
     unregistered=(),
     *,
-    levels=(24, 64),
+    levels=(24, 64, 128),
     margin: float = 0.3,
     photometric_weight: float = 1.0,
     iterations: int = 10,
@@ -509,12 +521,11 @@ def refine_poses(
     app = _Appearance(photo, ids, *surface_samples(shape, samples, seed))
     registered = sorted(int(i) for i in poses)
     unregistered = sorted(int(i) for i in unregistered if int(i) not in poses)
-    targets = {i: [_target(ids, K, i, boxes[i], side, margin) for side in levels] for i in registered + unregistered}
+    targets = {i: _levels(ids, K, i, boxes[i], levels, margin) for i in registered + unregistered}
     current = {i: np.asarray(poses[i], np.float64).copy() for i in registered}
     evaluations = dict.fromkeys(registered + unregistered, 0)
     seconds = dict.fromkeys(registered + unregistered, 0.0)
     log: list[str] = []
-    all_levels = range(len(levels))
 
     def problem(i, trusted, weight=photometric_weight) -> _Problem:
         reference = app.reference(K, {j: current[j] for j in trusted if j != i}, i)
@@ -528,9 +539,9 @@ def refine_poses(
         for i in instances:
             start = time.perf_counter()
             p = problem(i, trusted, weight)
-            current[i] = p.refine(current[i], all_levels, iterations)
+            current[i] = p.refine(current[i], None, iterations)
             if weight > 0:
-                current[i] = p.refine(_axis_sweep(p, current[i], NEAR_TURN, -1), all_levels[-1:], iterations)
+                current[i] = p.refine(_axis_sweep(p, current[i], NEAR_TURN, -1), [-1], iterations)
             evaluations[i] += p.evaluations
             seconds[i] += time.perf_counter() - start
 
@@ -554,28 +565,33 @@ def refine_poses(
         f"above {disagreement_factor} x: {flipped}; wrong {wrong}"
     )
 
+    posed = list(trusted)  # the instances others may borrow rotations and colours from
     for i in wrong + unregistered:
         start = time.perf_counter()
-        p = problem(i, trusted)
+        p = problem(i, posed)
         own = [current[i][:3, :3]] if i in current else []
-        rotations = _candidates(own + [current[j][:3, :3] for j in trusted if j != i])
-        depth = float(np.median([current[j][2, 3] for j in trusted]))
+        rotations = _candidates(own + [current[j][:3, :3] for j in posed if j != i])
+        depth = float(np.median([current[j][2, 3] for j in posed]))
         placed = [_place(p, R, depth, 0) for R in rotations]
         scored = sorted(placed, key=lambda T: p.cost(T, 0)[0])[:refine_candidates]
         if i in current:
             scored.append(current[i])
-        results = [p.refine(T, all_levels, iterations) for T in scored]
+        results = [p.refine(T, None, iterations) for T in scored]
         best = min(results, key=lambda T: p.cost(T)[0])
-        best = p.refine(_axis_sweep(p, best, FULL_TURN), all_levels, iterations)
+        best = p.refine(_axis_sweep(p, best, FULL_TURN), None, iterations)
         current[i] = best
+        cost = p.cost(best)[0]
+        if cost <= threshold:  # posed well enough to lend its rotation to the next ones
+            posed.append(i)
         evaluations[i] += p.evaluations
         seconds[i] += time.perf_counter() - start
-        log.append(f"instance {i}: {len(rotations)} candidate rotations, best cost {p.cost(best)[0]:.4f}")
+        log.append(f"instance {i}: {len(rotations)} candidate rotations, best cost {cost:.4f}")
     # Once more, every instance against the corrected ones.
+    everyone = registered + unregistered
     for _ in range(photometric_passes):
-        sweep(registered + unregistered, trusted + wrong + unregistered, photometric_weight)
+        sweep(everyone, everyone, photometric_weight)
 
-    after = costs(trusted + wrong + unregistered)
+    after = costs(everyone)
     nan = (float("nan"), float("nan"))
     return RefineResult(
         poses=current,
