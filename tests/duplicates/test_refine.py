@@ -32,9 +32,9 @@ def capture():
     return make_capture()
 
 
-def make_capture(count: int = 6, seed: int = 0):
+def make_capture(count: int = 6, seed: int = 0, size=(WIDTH, HEIGHT)):
     """Cans rendered at 320 x 240: the photo, the instance AOV and the true poses."""
-    scene, meta = make_duplicates({"count": count, "seed": seed, "camera": {"width": WIDTH, "height": HEIGHT}})
+    scene, meta = make_duplicates({"count": count, "seed": seed, "camera": {"width": size[0], "height": size[1]}})
     cam = scene.cameras[0]
     out = Renderer(scene, analyse(scene)).render(cam, spp=16, seed=0)
     truth = {p["instance_id"]: cam_from_obj(cam, p["T_obj2world"]) for p in meta["poses"]["instances"]}
@@ -183,8 +183,8 @@ def test_perturbed_cans_converge(capture, refined):
     ordinary = [i for i in poses if i != FLIPPED]
     swing = [errors(result.poses[i], capture["truth"][i])[1] for i in ordinary]
     depth = [errors(result.poses[i], capture["truth"][i])[3] for i in ordinary]
-    assert max(swing) < 1.5, swing  # measured 0.3 .. 1.3 degrees from 2 .. 4.3
-    assert max(depth) < 0.01, depth  # measured 0.06 .. 0.2 % from 5 %
+    assert max(swing) < 1.5, swing  # measured 0.3 .. 1.1 degrees from 2 .. 4.3
+    assert max(depth) < 0.01, depth  # measured 0.01 .. 0.16 % from 5 %
     for i in ordinary:
         assert result.silhouette_after[i] < 0.5 * result.silhouette_before[i], i
         assert i not in result.reinitialised
@@ -194,12 +194,12 @@ def test_flipped_can_is_detected_and_turned_back(capture, refined):
     _, result = refined
     assert result.reinitialised == [FLIPPED]
     _, swing, _, depth = errors(result.poses[FLIPPED], capture["truth"][FLIPPED])
-    assert swing < 3.0 and depth < 0.01  # measured 0.18 degrees, 0.22 %
+    assert swing < 3.0 and depth < 0.01  # measured 0.08 degrees, 0.24 %
 
 
 def test_turn_about_the_axis_is_found_by_the_label(capture, refined):
     """The silhouettes cannot see a can's turn about its axis; the photometric term does,
-    coarsely (measured 0.7 .. 15 degrees, median 8; a guess would give a median of 90)."""
+    coarsely (measured 0.9 .. 7.8 degrees, median 7; a guess would give a median of 90)."""
     _, result = refined
     twist = [errors(result.poses[i], G)[2] for i, G in capture["truth"].items()]
     assert np.median(twist) < 15.0 and max(twist) < 30.0, twist
@@ -210,15 +210,15 @@ def test_unregistered_can_gets_a_pose(capture, refined):
     assert result.initialised == [UNREGISTERED]
     assert set(result.poses) == set(capture["truth"])
     _, swing, _, depth = errors(result.poses[UNREGISTERED], capture["truth"][UNREGISTERED])
-    assert swing < 3.0 and depth < 0.01  # measured 0.3 degrees, 0.34 %
+    assert swing < 3.0 and depth < 0.01  # measured 0.4 degrees, 0.13 %
     assert np.isnan(result.residual_before[UNREGISTERED])
 
 
 def test_evaluations_stay_within_budget(refined):
     poses, result = refined
     fresh = set(result.reinitialised) | set(result.initialised)
-    assert max(n for i, n in result.evaluations.items() if i not in fresh) <= 400  # measured: 187 .. 277
-    assert max(result.evaluations.values()) <= 1000  # measured: 542 (unregistered), 673 (flipped)
+    assert max(n for i, n in result.evaluations.items() if i not in fresh) <= 400  # measured: 221 .. 263
+    assert max(result.evaluations.values()) <= 1000  # measured: 555 (unregistered), 690 (flipped)
 
 
 def test_bad_input_names_what_was_expected(capture):
@@ -230,3 +230,22 @@ def test_bad_input_names_what_was_expected(capture):
         refine_poses(mesh, K, ids, image[:10], {1: T})
     with pytest.raises(SceneError, match="poses"):
         refine_poses(mesh, K, ids, image, {}, [1])
+
+
+def ablation(size=(320, 240), scenes=((6, 0), (8, 3)), weights=(0.0, 1.0, 5.0)) -> None:
+    """Which terms help (docs/duplicates-refine.md): the tests' perturbations on other scenes and
+    sizes, silhouettes alone (weight 0) against silhouettes and colours, errors per can printed."""
+    for count, seed in scenes:
+        capture = make_capture(count, seed, size)
+        for weight in weights:
+            print(f"=== {count} cans, seed {seed}, {size[0]} x {size[1]}, photometric_weight {weight}")
+            _, result = run_refinement(capture, photometric_weight=weight)
+            e = np.array([errors(result.poses[i], G) for i, G in capture["truth"].items()])
+            swing, twist, depth = np.median(e[:, 1:], axis=0)
+            print(f"median swing {swing:.2f}, twist {twist:.2f} deg, depth {100 * depth:.2f} %")
+
+
+if __name__ == "__main__":  # PYTHONPATH=workflow python tests/duplicates/test_refine.py [WIDTH HEIGHT]
+    import sys
+
+    ablation(tuple(int(v) for v in sys.argv[1:3]) if len(sys.argv) > 2 else (320, 240))
