@@ -506,11 +506,14 @@ def refine_poses(
     seed: int = 0,
 ) -> RefineResult:
     """Refine every registered instance's T_cam_from_obj against its mask and pixels, find the
-    registered-but-wrong ones by their residual and re-initialise them, and give every
-    ``unregistered`` instance a pose. ``levels``: the longer side, in working pixels, of an
-    instance's box at each coarse-to-fine level; ``iterations``: least-squares iterations per
-    level (each costs 7 evaluations); a residual above ``outlier_factor`` x the median of all
-    and above ``outlier_floor`` marks a pose wrong."""
+    registered-but-wrong ones and re-initialise them, and give every ``unregistered`` instance
+    a pose. ``levels``: the longest side, in working pixels, of an instance's box at each
+    coarse-to-fine level; ``iterations``: least-squares iterations per level (each costs 7
+    evaluations); a pose is wrong when its residual is above ``outlier_factor`` x the median of
+    all and above ``outlier_floor``, or its colour disagreement with the others is above
+    ``disagreement_factor`` x the median; ``refine_candidates``: how many of the best-scored
+    candidate poses of a re-initialised instance are refined; ``samples``: surface points of
+    the photometric term; ``blur_px``: the photo's Gaussian blur (render or sensor noise)."""
     boxes = _check_inputs(mesh, K, ids, image, poses, unregistered)
     K = np.asarray(K, np.float64)
     ids = np.asarray(ids)
