@@ -406,6 +406,11 @@ def _axis_sweep(problem: _Problem, T: np.ndarray, degrees, level: int = 0) -> np
     return best
 
 
+# Rotations spread over all of SO(3) (the icosahedral group: 60, none further than about 40
+# degrees from any rotation), candidates besides the borrowed ones: with few instances posed,
+# none of theirs may be near this one's.
+SPREAD = list(Rotation.create_group("I").as_matrix())
+
 FULL_TURN = np.arange(15, 360, 15)  # degrees: re-initialisation
 NEAR_TURN = np.array([-15, -10, -6, -3, 3, 6, 10, 15])  # degrees: after a local refinement
 
@@ -559,8 +564,9 @@ def refine_poses(
     # A can flipped end over end keeps its silhouette: its residual need not stand out, but its
     # colours disagree with the others'.
     disagreement = _disagreement(app, K, current)
-    typical = float(np.nanmedian(list(disagreement.values())))
-    flipped = [i for i in registered if disagreement[i] > disagreement_factor * typical]
+    compared = [d for d in disagreement.values() if np.isfinite(d)]  # none with one instance
+    typical = float(np.median(compared)) if compared else float("nan")
+    flipped = [i for i in registered if compared and disagreement[i] > disagreement_factor * typical]
     wrong = [i for i in registered if refined[i][0] > threshold or i in flipped]
     trusted = [i for i in registered if i not in wrong] or registered
     log.append(
@@ -573,7 +579,7 @@ def refine_poses(
         start = time.perf_counter()
         p = problem(i, posed)
         own = [current[i][:3, :3]] if i in current else []
-        rotations = _candidates(own + [current[j][:3, :3] for j in posed if j != i])
+        rotations = _candidates(own + [current[j][:3, :3] for j in posed if j != i]) + SPREAD
         depth = float(np.median([current[j][2, 3] for j in posed]))
         placed = [_place(p, R, depth, 0) for R in rotations]
         scored = sorted(placed, key=lambda T: p.cost(T, 0)[0])[:refine_candidates]
