@@ -4,22 +4,27 @@
 The copies are identical, so they share one colour distribution that the support (a floor, a
 table) lacks. The steps:
 
-1. Object colours. Without an exemplar: the support is what the image's border shows (objects
-   rarely cover it), so ``P(c | support) / P(c)`` (border histogram over the whole image's, in
-   Lab) is about 1 / (support share) on the support and near 0 on colours only the objects
-   have. With an exemplar box: GrabCut in the box gives the object's own pixels, and a colour
-   is the object's where ``P(c | object)`` beats ``P(c | support)``.
+1. Object colours. A first guess: the support is what the image's border shows (objects rarely
+   cover it), so colours with ``P(c | border) / P(c)`` below ``core_threshold`` (Lab
+   histograms) are the object's. A backdrop at the border may share the object's darker
+   colours, so the guess only trains the object's histogram: a colour is the object's where
+   ``P(c | object)`` beats ``likelihood_ratio`` times ``P(c | support)``, the support being
+   everything away from the guess. With an exemplar box, GrabCut in the box gives the
+   object's pixels instead of the guess.
 2. Cores: the pixels of object colours, opened (noise) and closed over gaps such as a white
-   band across a label, a fraction of the instance size wide. One core per copy, except where
+   band across a label, a fraction of the instance size wide; pieces of one copy further apart
+   joined when together they are as compact as one copy. One core per copy, except where
    copies touch.
 3. Touching copies are split, not merged: a core of about k times the expected instance area
-   (the median core, or the exemplar's) is cut into k by a watershed of its distance transform
-   from the k plateaus of that transform (the copies' middles; the neck between them is low).
+   (the median of the cores that are convex like one copy, or the exemplar's) is cut into k:
+   the k deepest plateaus of its distance transform mark the copies' middles (the neck between
+   them is lower) and each pixel goes to the nearest.
 4. Extent: GrabCut, seeded with the cores as foreground and the far support as background,
    adds the object's parts in support-like colours (caps, a white band); each added pixel goes
-   to the nearest core (a watershed of the distance to the cores), so GrabCut never merges two
-   copies. Then each instance is its convex hull, not crossing another instance: a convex
-   object's silhouette is convex (cans, boxes), which restores parts no colour separates.
+   to the nearest core, so GrabCut never merges two copies, and a piece with no core is
+   dropped. Then each instance becomes its convex hull, not crossing another instance: a
+   convex object's silhouette is convex (cans, boxes), which restores parts no colour
+   separates.
 5. Specks (below ``min_area_fraction`` of the expected area) are dropped.
 
 Score of an instance: the Bhattacharyya similarity of its colour histogram to the pooled
@@ -54,7 +59,9 @@ class OpenCVSettings:
     exemplar: tuple[float, float, float, float] | None = None  # x0, y0, x1, y1 pixels of one copy
     core_threshold: float = 0.3  # P(c|support)/P(c) below this: an object colour
     border_fraction: float = 0.04  # width of the border band that shows the support
+    likelihood_ratio: float = 2.0  # P(c|object) over P(c|support) above this: an object colour
     close_fraction: float = 0.15  # closing radius over sqrt(expected area): gaps in a core
+    join_fraction: float = 0.5  # pieces of one copy this far apart (over sqrt(expected area)) may join
     split_factor: float = 1.5  # a core this many expected areas or more is touching copies
     min_area_fraction: float = 0.3  # specks below this share of the expected area are dropped
     grabcut_iterations: int = 5
@@ -100,10 +107,24 @@ def _areas(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, stats[1:, cv2.CC_STAT_AREA]
 
 
-def _typical_area(areas: np.ndarray) -> float:
+def _hull_area(mask: np.ndarray) -> float:
+    return float(cv2.contourArea(cv2.convexHull(cv2.findNonZero(mask.astype(np.uint8)))))
+
+
+def _solidity(mask: np.ndarray) -> float:
+    """Area over convex hull area: about 1 for one convex copy, lower for two touching at an
+    angle (an L or a V)."""
+    hull = _hull_area(mask)
+    return float(mask.sum()) / hull if hull > 0 else 1.0
+
+
+def _typical_area(labels: np.ndarray, areas: np.ndarray) -> float:
     """The expected instance area: the median of the components of at least a fifth of the
-    largest (specks do not pull it down; touching pairs are a minority)."""
-    return float(np.median(areas[areas >= 0.2 * areas.max()]))
+    largest (specks do not pull it down) that are convex like one copy (solidity of 0.85 or
+    more: copies touching at an angle do not pull it up); all of them if none is."""
+    big = np.flatnonzero(areas >= 0.2 * areas.max()) + 1
+    solid = [i for i in big if _solidity(labels == i) >= 0.85]
+    return float(np.median(areas[np.asarray(solid or big) - 1]))
 
 
 def _exemplar_object(bgr: np.ndarray, box, iterations: int) -> np.ndarray:
@@ -120,62 +141,100 @@ def _exemplar_object(bgr: np.ndarray, box, iterations: int) -> np.ndarray:
 def _object_colours(lab, bgr, s: OpenCVSettings) -> tuple[np.ndarray, float | None]:
     """Per pixel True where its colour is the object's (step 1), and the exemplar's area (None
     without one)."""
-    support = _border(lab.shape[:2], s.border_fraction)
+    everywhere = np.ones(lab.shape[:2], bool)
     if s.exemplar is None:
-        ratio = _backproject(lab, colour_histogram(lab, support)) / np.maximum(
-            _backproject(lab, colour_histogram(lab, np.ones(lab.shape[:2], bool))), 1e-12
-        )
-        return ratio < s.core_threshold, None
-    exemplar = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations)
-    x0, y0, x1, y1 = (int(round(v)) for v in s.exemplar)
-    ring = np.zeros(exemplar.shape, bool)
-    ring[max(0, y0) : y1, max(0, x0) : x1] = True
-    support |= ring & ~exemplar  # the exemplar box's own background is support too
-    p_obj = _backproject(lab, colour_histogram(lab, exemplar))
+        # First guess: colours the border lacks. A backdrop at the border may share some of the
+        # object's darker colours, so that guess only trains the object's histogram, then each
+        # colour is judged against everything away from the guess (step 1's second half).
+        border = colour_histogram(lab, _border(lab.shape[:2], s.border_fraction))
+        ratio = _backproject(lab, border) / np.maximum(_backproject(lab, colour_histogram(lab, everywhere)), 1e-12)
+        sample = cv2.morphologyEx((ratio < s.core_threshold).astype(np.uint8), cv2.MORPH_OPEN, _disk(1)) > 0
+        area = None
+    else:
+        sample = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations)
+        area = float(sample.sum())
+    if not sample.any():
+        return sample, area
+    margin = max(2.0, 0.01 * min(lab.shape[:2]))
+    support = cv2.dilate(sample.astype(np.uint8), _disk(margin)) == 0
+    p_obj = _backproject(lab, colour_histogram(lab, sample))
     p_sup = _backproject(lab, colour_histogram(lab, support))
-    return p_obj > 2.0 * p_sup, float(exemplar.sum())
+    return p_obj > s.likelihood_ratio * p_sup, area
 
 
-def _watershed(markers: np.ndarray, region: np.ndarray, elevation: np.ndarray) -> np.ndarray:
-    """Grow ``markers`` (0 = unlabelled) over ``region`` by ``elevation`` (scipy's image
-    foresting transform); 0 outside the region."""
-    m = markers.astype(np.int32)
-    outside = int(m.max()) + 1
-    m = np.where(region, m, outside)
-    e = elevation.astype(np.float64)
-    span = np.ptp(e[region]) if region.any() else 1.0
-    e = (e - (e[region].min() if region.any() else 0.0)) / max(span, 1e-12)
-    e = np.where(region, np.clip(e, 0, 1) * 65000, 65535).astype(np.uint16)
-    grown = ndimage.watershed_ift(e, m)
-    grown[(grown == outside) | ~region] = 0
-    return grown
+def _nearest(markers: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """Each pixel of ``region`` labelled as its nearest marker pixel (a Voronoi partition of the
+    region by the markers); 0 outside it. For touching convex copies with a marker in each
+    middle, the cut falls midway between them, across the neck."""
+    if not markers.any():
+        return np.zeros(markers.shape, np.int32)
+    _, (iy, ix) = ndimage.distance_transform_edt(markers == 0, return_indices=True)
+    return np.where(region, markers[iy, ix], 0).astype(np.int32)
 
 
 def _split(blob: np.ndarray, k: int) -> np.ndarray:
     """Cut a core of k touching copies into k (step 3): markers are the plateaus of its distance
-    transform above the highest level that gives k of them (or the nearest count)."""
+    transform at the highest level that gives k or more of them (the copies' middles rise
+    above the neck between them), the k deepest kept; each pixel to the nearest one."""
     dist = cv2.distanceTransform(blob.astype(np.uint8), cv2.DIST_L2, 5)
-    best = None
-    for level in np.linspace(0.9, 0.1, 17):
+    for level in np.linspace(0.9, 0.1, 33):
         markers, count = ndimage.label(dist > level * dist.max())
-        if best is None or abs(count - k) < abs(best[1] - k):
-            best = markers, count
-        if count == k:
+        if count >= k:
             break
-    return _watershed(best[0], blob, dist.max() - dist)
+    if count < k:
+        return blob.astype(np.int32)  # one plateau at every level: no neck, nothing to cut
+    depth = ndimage.maximum(dist, markers, np.arange(1, count + 1))
+    keep = np.zeros(count + 1, np.int32)
+    keep[np.argsort(depth)[::-1][:k] + 1] = np.arange(1, k + 1)
+    return _nearest(keep[markers], blob)
+
+
+def _join_fragments(labels: np.ndarray, areas: np.ndarray, expected: float, reach: float):
+    """Join the pieces of one copy that a band of support-like colour (a white stripe across a
+    label) cut further apart than the closing bridges: a piece smaller than expected joins its
+    nearest neighbour within ``reach`` * sqrt(expected) when the two together stay as compact
+    as one copy (convex hull no larger than 1.25 typical single copies' hulls). Two copies never
+    fit one copy's hull, so they stay apart."""
+    n = len(areas)
+    if n < 2 or reach <= 0:
+        return labels, areas
+    singles = [i for i in range(1, n + 1) if 0.7 * expected <= areas[i - 1] <= 1.4 * expected]
+    if not singles:
+        return labels, areas
+    typical_hull = float(np.median([_hull_area(labels == i) for i in singles]))
+    limit = reach * np.sqrt(expected)
+    owner = np.arange(n + 1)  # union-find over component numbers
+    for i in np.argsort(areas) + 1:  # smallest pieces first
+        if areas[i - 1] >= 0.8 * expected or owner[i] != i:
+            continue
+        gap = cv2.distanceTransform((labels != i).astype(np.uint8), cv2.DIST_L2, 5)
+        near = [(float(gap[labels == j].min()), j) for j in range(1, n + 1) if j != i and owner[j] == j]
+        for distance, j in sorted(near):
+            if distance > limit:
+                break
+            union = np.isin(labels, [k for k in range(1, n + 1) if owner[k] in (i, j)])
+            if _hull_area(union) <= 1.25 * typical_hull:
+                owner[owner == i] = j
+                break
+    joined = owner[labels]
+    joined[labels == 0] = 0
+    _, dense = np.unique(joined, return_inverse=True)
+    dense = dense.reshape(labels.shape).astype(np.int32)
+    return dense, np.bincount(dense.ravel())[1:]
 
 
 def _cores(is_object: np.ndarray, s: OpenCVSettings, area: float | None):
     """Labelled cores, one per copy (steps 2, 3 and 5), and the expected instance area."""
     core = cv2.morphologyEx(is_object.astype(np.uint8), cv2.MORPH_OPEN, _disk(1))
-    _, areas = _areas(core)
+    labels, areas = _areas(core)
     if not len(areas):
         return np.zeros(core.shape, np.int32), core, 0.0
-    expected = area or _typical_area(areas)
+    expected = area or _typical_area(labels, areas)
     closed = cv2.morphologyEx(core, cv2.MORPH_CLOSE, _disk(s.close_fraction * np.sqrt(expected)))
     closed = ndimage.binary_fill_holes(closed)
     labels, areas = _areas(closed)
-    expected = area or _typical_area(areas)
+    expected = area or _typical_area(labels, areas)
+    labels, areas = _join_fragments(labels, areas, expected, s.join_fraction)
     seeds = np.zeros(core.shape, np.int32)
     for i in np.flatnonzero(areas >= s.min_area_fraction * expected) + 1:
         blob = labels == i
@@ -199,8 +258,9 @@ def _extent(bgr, seeds, core, expected, s: OpenCVSettings) -> np.ndarray:
         cv2.grabCut(bgr, trimap, None, bgd, fgd, s.grabcut_iterations, cv2.GC_INIT_WITH_MASK)
     fg = (trimap == cv2.GC_FGD) | (trimap == cv2.GC_PR_FGD)
     fg = (cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, _disk(1)) > 0) | (seeds > 0)
-    distance = cv2.distanceTransform((seeds == 0).astype(np.uint8), cv2.DIST_L2, 5)
-    return _watershed(seeds, fg, distance)
+    parts, count = ndimage.label(fg)
+    with_core = np.unique(parts[seeds > 0])  # a piece that touches no core is not a copy
+    return _nearest(seeds, np.isin(parts, with_core[with_core > 0]))
 
 
 def _convex(ids: np.ndarray) -> np.ndarray:

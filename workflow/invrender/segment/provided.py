@@ -1,13 +1,13 @@
 """The `provided` backend: instance masks from any tool, read and checked.
 
-    an id image   one PNG, 8 or 16 bit, single channel: 0 = background, each other value one
-                  instance (the form `segment` itself writes, and most tools can export)
-    a folder      one PNG per instance (single channel, nonzero = the instance), in name order;
-                  a pixel two files claim stays with the first
-    a table       optional, with an id image: JSON ({"instances": [{"id": ...}]}, a list of
-                  such objects, or a list of ids) or CSV with an `id` column, listing the ids
-                  the image may hold. An id beyond it stops: the image and the table disagree,
-                  so one of them is not what the user meant.
+an id image   one PNG, 8 or 16 bit, single channel: 0 = background, each other value one
+              instance (the form `segment` itself writes, and most tools can export)
+a folder      one PNG per instance (single channel, nonzero = the instance), in name order;
+              a pixel two files claim stays with the first
+a table       optional, with an id image: JSON ({"instances": [{"id": ...}]}, a list of
+              such objects, or a list of ids) or CSV with an `id` column, listing the ids
+              the image may hold. An id beyond it stops: the image and the table disagree,
+              so one of them is not what the user meant.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ def _ids_from_json(path: Path) -> list:
         raise SceneError(path, "(file)", f"a JSON instance table ({error})") from None
     rows = data.get("instances") if isinstance(data, dict) else data
     if not isinstance(rows, list):
-        raise SceneError(path, "instances", "a list of instances ({\"id\": ...}) or of ids")
+        raise SceneError(path, "instances", 'a list of instances ({"id": ...}) or of ids')
     return [row.get("id") if isinstance(row, dict) else row for row in rows]
 
 

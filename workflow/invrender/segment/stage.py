@@ -102,9 +102,15 @@ def _check_settings(backend, masks, table, exemplar, min_instances, size) -> Non
     if backend == "provided" and masks is None:
         raise SceneError("segment --masks", "masks", "an id image or a folder of masks for the provided backend")
     if backend != "provided" and (masks is not None or table is not None):
-        raise SceneError("segment --masks", "masks", f"no masks or table with the {backend} backend (they are for provided)")
+        raise SceneError(
+            "segment --masks", "masks", f"no masks or table with the {backend} backend (they are for provided)"
+        )
     if isinstance(min_instances, bool) or not isinstance(min_instances, int) or min_instances < MIN_INSTANCES:
-        raise SceneError("segment --min-instances", "instance count", f"an integer of at least {MIN_INSTANCES}, got {min_instances!r}")
+        raise SceneError(
+            "segment --min-instances",
+            "instance count",
+            f"an integer of at least {MIN_INSTANCES}, got {min_instances!r}",
+        )
     if exemplar is not None:
         x0, y0, x1, y1 = (float(v) for v in exemplar)
         if not (0 <= x0 < x1 <= size[0] and 0 <= y0 < y1 <= size[1]):
@@ -147,7 +153,9 @@ def run(
         fields = OpenCVSettings.__dataclass_fields__
         unknown = sorted(set(settings or {}) - set(fields) - {"exemplar"})
         if unknown:
-            raise SceneError("segment settings", unknown[0], f"one of {', '.join(k for k in fields if k != 'exemplar')}")
+            raise SceneError(
+                "segment settings", unknown[0], f"one of {', '.join(k for k in fields if k != 'exemplar')}"
+            )
         opts = OpenCVSettings(**(settings or {}), exemplar=tuple(exemplar) if exemplar is not None else None)
         found, found_scores = segment_instances(rgb, opts, log=log)
         ids, old_of = renumber(found)
