@@ -338,16 +338,16 @@ def build_parser() -> argparse.ArgumentParser:
         "segment", help="the copies of one object in one photograph -> masks/, instances.json, overlay.png"
     )
     p.add_argument("image", help="the photograph (EXR, PNG, JPEG)")
-    p.add_argument("--out", required=True, help="directory to write (masks/<image stem>.png, instances.json, overlay.png)")
+    p.add_argument("--out", required=True, help="directory to write (masks/, instances.json, overlay.png)")
     p.add_argument("--backend", choices=["opencv", "provided"], default="opencv")
-    p.add_argument("--masks", help="provided: a PNG of instance ids (0 = background) or a folder with one PNG per instance")
+    p.add_argument("--masks", help="provided: a PNG of instance ids (0 = background) or a folder of one PNG each")
     p.add_argument("--table", help="provided: JSON or CSV listing the ids the id image may hold")
     p.add_argument(
-        "--exemplar", type=float, nargs=4, metavar=("X0", "Y0", "X1", "Y1"), help="opencv: a box around one copy, pixels"
+        "--exemplar", type=float, nargs=4, metavar=("X0", "Y0", "X1", "Y1"), help="opencv: a box around one copy"
     )
     p.add_argument("--min-instances", type=int, default=3, help="fewer stops the stage (at least 3)")
     p.add_argument(
-        "--set", action="append", metavar="KEY=VALUE", help="opencv setting (segment/opencv.py OpenCVSettings), repeatable"
+        "--set", action="append", metavar="KEY=VALUE", help="opencv setting (OpenCVSettings in segment/opencv.py)"
     )
     p.set_defaults(func=cmd_segment)
 

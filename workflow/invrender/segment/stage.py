@@ -117,7 +117,8 @@ def _check_settings(backend, masks, table, exemplar, min_instances, size) -> Non
             raise SceneError(
                 "segment --exemplar",
                 "exemplar box",
-                f"x0 y0 x1 y1 with 0 <= x0 < x1 <= {size[0]} and 0 <= y0 < y1 <= {size[1]} (the image), got {list(exemplar)}",
+                f"x0 y0 x1 y1 inside the image (0 <= x0 < x1 <= {size[0]}, 0 <= y0 < y1 <= {size[1]}), "
+                f"got {list(exemplar)}",
             )
 
 
