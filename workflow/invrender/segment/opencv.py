@@ -128,38 +128,50 @@ def _typical_area(labels: np.ndarray, areas: np.ndarray) -> float:
 
 
 def _exemplar_object(bgr: np.ndarray, box, iterations: int) -> np.ndarray:
-    """The exemplar copy's own pixels: GrabCut initialised by its box."""
+    """The exemplar copy's own pixels: GrabCut initialised by its box, run on the box and a
+    margin of its size around it (a smaller margin holds too little support, and a neighbour
+    touching the copy can then teach GrabCut's background model the object's colours)."""
     h, w = bgr.shape[:2]
     x0, y0, x1, y1 = (int(round(v)) for v in box)
     x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
-    mask = np.zeros((h, w), np.uint8)
+    mx, my = x1 - x0 + 2, y1 - y0 + 2
+    cx0, cy0, cx1, cy1 = max(0, x0 - mx), max(0, y0 - my), min(w, x1 + mx), min(h, y1 + my)
+    crop = np.ascontiguousarray(bgr[cy0:cy1, cx0:cx1])
+    mask = np.zeros(crop.shape[:2], np.uint8)
     bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
-    cv2.grabCut(bgr, mask, (x0, y0, x1 - x0, y1 - y0), bgd, fgd, iterations, cv2.GC_INIT_WITH_RECT)
-    return (mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)
+    rect = (x0 - cx0, y0 - cy0, x1 - x0, y1 - y0)
+    cv2.grabCut(crop, mask, rect, bgd, fgd, max(1, iterations), cv2.GC_INIT_WITH_RECT)
+    out = np.zeros((h, w), bool)
+    out[cy0:cy1, cx0:cx1] = (mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)
+    return out
 
 
-def _object_colours(lab, bgr, s: OpenCVSettings) -> tuple[np.ndarray, float | None]:
-    """Per pixel True where its colour is the object's (step 1), and the exemplar's area (None
-    without one)."""
+def _object_colours(lab, bgr, s: OpenCVSettings) -> np.ndarray:
+    """Per pixel True where its colour is the object's (step 1)."""
+    # First guess: colours the border lacks. A backdrop at the border may share some of the
+    # object's darker colours, so that guess only trains the object's histogram, then each
+    # colour is judged against everything away from the guess (step 1's second half).
     everywhere = np.ones(lab.shape[:2], bool)
-    if s.exemplar is None:
-        # First guess: colours the border lacks. A backdrop at the border may share some of the
-        # object's darker colours, so that guess only trains the object's histogram, then each
-        # colour is judged against everything away from the guess (step 1's second half).
-        border = colour_histogram(lab, _border(lab.shape[:2], s.border_fraction))
-        ratio = _backproject(lab, border) / np.maximum(_backproject(lab, colour_histogram(lab, everywhere)), 1e-12)
-        sample = cv2.morphologyEx((ratio < s.core_threshold).astype(np.uint8), cv2.MORPH_OPEN, _disk(1)) > 0
-        area = None
-    else:
-        sample = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations)
-        area = float(sample.sum())
+    border = colour_histogram(lab, _border(lab.shape[:2], s.border_fraction))
+    ratio = _backproject(lab, border) / np.maximum(_backproject(lab, colour_histogram(lab, everywhere)), 1e-12)
+    sample = cv2.morphologyEx((ratio < s.core_threshold).astype(np.uint8), cv2.MORPH_OPEN, _disk(1)) > 0
+    if s.exemplar is not None:  # the exemplar's pixels: GrabCut's and the guess's inside its box
+        x0, y0, x1, y1 = (int(round(v)) for v in s.exemplar)
+        inside = np.zeros(sample.shape, bool)
+        inside[max(0, y0) : y1, max(0, x0) : x1] = True
+        sample = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations) | (sample & inside)
     if not sample.any():
-        return sample, area
-    margin = max(2.0, 0.01 * min(lab.shape[:2]))
-    support = cv2.dilate(sample.astype(np.uint8), _disk(margin)) == 0
+        return sample
+    if s.exemplar is None:
+        margin = max(2.0, 0.01 * min(lab.shape[:2]))
+        support = cv2.dilate(sample.astype(np.uint8), _disk(margin)) == 0
+    else:  # the other copies are not support: the border and the exemplar box's background are
+        x0, y0, x1, y1 = (int(round(v)) for v in s.exemplar)
+        support = _border(lab.shape[:2], s.border_fraction)
+        support[max(0, y0) : y1, max(0, x0) : x1] = ~sample[max(0, y0) : y1, max(0, x0) : x1]
     p_obj = _backproject(lab, colour_histogram(lab, sample))
     p_sup = _backproject(lab, colour_histogram(lab, support))
-    return p_obj > s.likelihood_ratio * p_sup, area
+    return p_obj > s.likelihood_ratio * p_sup
 
 
 def _nearest(markers: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -223,17 +235,17 @@ def _join_fragments(labels: np.ndarray, areas: np.ndarray, expected: float, reac
     return dense, np.bincount(dense.ravel())[1:]
 
 
-def _cores(is_object: np.ndarray, s: OpenCVSettings, area: float | None):
+def _cores(is_object: np.ndarray, s: OpenCVSettings):
     """Labelled cores, one per copy (steps 2, 3 and 5), and the expected instance area."""
     core = cv2.morphologyEx(is_object.astype(np.uint8), cv2.MORPH_OPEN, _disk(1))
     labels, areas = _areas(core)
     if not len(areas):
         return np.zeros(core.shape, np.int32), core, 0.0
-    expected = area or _typical_area(labels, areas)
+    expected = _typical_area(labels, areas)
     closed = cv2.morphologyEx(core, cv2.MORPH_CLOSE, _disk(s.close_fraction * np.sqrt(expected)))
     closed = ndimage.binary_fill_holes(closed)
     labels, areas = _areas(closed)
-    expected = area or _typical_area(labels, areas)
+    expected = _typical_area(labels, areas)
     labels, areas = _join_fragments(labels, areas, expected, s.join_fraction)
     seeds = np.zeros(core.shape, np.int32)
     for i in np.flatnonzero(areas >= s.min_area_fraction * expected) + 1:
@@ -297,14 +309,14 @@ def segment_instances(rgb: np.ndarray, settings: OpenCVSettings | None = None, l
     srgb = cv2.medianBlur(to_srgb8(rgb), 3)  # a photograph's (or a render's) pixel noise
     bgr = np.ascontiguousarray(srgb[:, :, ::-1])
     lab = cv2.cvtColor(srgb, cv2.COLOR_RGB2Lab)
-    is_object, exemplar_area = _object_colours(lab, bgr, s)
-    seeds, core, expected = _cores(is_object, s, exemplar_area)
+    is_object = _object_colours(lab, bgr, s)
+    seeds, core, expected = _cores(is_object, s)
     log.info(
         "segment: %d cores of object colours (%.1f %% of the image), expected instance area %.0f px (%s)",
         int(seeds.max()),
         100 * float(is_object.mean()),
         expected,
-        "the exemplar's" if exemplar_area else "median core",
+        "the median convex core",
     )
     if seeds.max() == 0:
         return seeds, {}
