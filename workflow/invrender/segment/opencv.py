@@ -52,6 +52,9 @@ __all__ = ["OpenCVSettings", "segment_instances", "to_srgb8", "colour_histogram"
 logger = logging.getLogger(__name__)
 
 LAB_BINS = (16, 24, 24)  # L, a, b: coarse in lightness (shading), fine in chroma
+# Pixels across a copy (sqrt of its core's area) that GrabCut works at, at most: at 1600 x 1200
+# 96 took 9.3 s and 64 took 7.1 s for the same IoU (0.868, 0.863), 48 lost some (0.831).
+GRABCUT_SIZE = 64
 
 
 @dataclass
@@ -65,6 +68,7 @@ class OpenCVSettings:
     split_factor: float = 1.5  # a core this many expected areas or more is touching copies
     min_area_fraction: float = 0.3  # specks below this share of the expected area are dropped
     grabcut_iterations: int = 5
+    extent_fraction: float = 0.4  # GrabCut may add pixels this far from a core (of sqrt(expected area))
     convex: bool = True  # each instance its convex hull (convex objects: cans, boxes)
 
 
@@ -105,6 +109,17 @@ def _border(shape, fraction: float) -> np.ndarray:
 def _areas(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     _, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     return labels, stats[1:, cv2.CC_STAT_AREA]
+
+
+def _split_into_copies(blob: np.ndarray, k: int, expected: float) -> np.ndarray:
+    """The blob cut into k copies, or fewer where a cut leaves a piece below a third of a copy (the
+    area overestimates k where copies show more of their colours than the median copy)."""
+    for count in range(k, 1, -1):
+        parts = _split(blob, count)
+        sizes = np.bincount(parts.ravel())[1:]
+        if parts.max() == count and sizes.min() >= 0.35 * expected:
+            return parts
+    return blob.astype(np.int32)
 
 
 def _hull_area(mask: np.ndarray) -> float:
@@ -250,11 +265,35 @@ def _cores(is_object: np.ndarray, s: OpenCVSettings):
     seeds = np.zeros(core.shape, np.int32)
     for i in np.flatnonzero(areas >= s.min_area_fraction * expected) + 1:
         blob = labels == i
-        k = int(round(areas[i - 1] / expected))
-        parts = _split(blob, k) if k >= 2 and areas[i - 1] >= s.split_factor * expected else blob.astype(np.int32)
+        k = int(round(areas[i - 1] / expected)) if areas[i - 1] >= s.split_factor * expected else 1
+        parts = _split_into_copies(blob, k, expected)
         for j in range(1, int(parts.max()) + 1):
             seeds[parts == j] = seeds.max() + 1
     return seeds, core, expected
+
+
+def _grabcut_windows(bgr: np.ndarray, trimap: np.ndarray, margin: int, iterations: int, scale: float) -> None:
+    """GrabCut on each group of nearby copies in its own window (the group's undecided pixels
+    and a ring of ``margin`` sure support), at ``scale`` (<= 1) of the image's size, ``trimap``
+    updated in place. Windows give each group a background model of the support around it;
+    the scale keeps a copy about GRABCUT_SIZE pixels across, where GrabCut's cost is per pixel
+    (on a whole 1600 x 1200 image it took 20 s)."""
+    groups, _ = ndimage.label(trimap != cv2.GC_BGD)
+    h, w = trimap.shape
+    for window in ndimage.find_objects(groups):
+        y0, y1 = max(0, window[0].start - margin), min(h, window[0].stop + margin)
+        x0, x1 = max(0, window[1].start - margin), min(w, window[1].stop + margin)
+        full = trimap[y0:y1, x0:x1]
+        size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
+        crop = cv2.resize(full, size, interpolation=cv2.INTER_NEAREST)
+        if not (crop == cv2.GC_BGD).any() or not ((crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)).any():
+            continue
+        image = cv2.resize(bgr[y0:y1, x0:x1], size, interpolation=cv2.INTER_AREA)
+        bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+        cv2.grabCut(image, crop, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+        decided = cv2.resize(crop, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)
+        undecided = (full == cv2.GC_PR_FGD) | (full == cv2.GC_PR_BGD)
+        full[undecided] = decided[undecided]
 
 
 def _extent(bgr, seeds, core, expected, s: OpenCVSettings) -> np.ndarray:
@@ -262,12 +301,12 @@ def _extent(bgr, seeds, core, expected, s: OpenCVSettings) -> np.ndarray:
     length = np.sqrt(expected)
     cores = (seeds > 0).astype(np.uint8)
     trimap = np.full(seeds.shape, cv2.GC_BGD, np.uint8)
-    trimap[cv2.dilate(cores, _disk(0.4 * length)) > 0] = cv2.GC_PR_BGD
+    trimap[cv2.dilate(cores, _disk(s.extent_fraction * length)) > 0] = cv2.GC_PR_BGD
     trimap[cv2.dilate(cores, _disk(0.1 * length)) > 0] = cv2.GC_PR_FGD
     trimap[(cv2.erode(core, _disk(1)) > 0) & (seeds > 0)] = cv2.GC_FGD
-    if (trimap == cv2.GC_BGD).any() and s.grabcut_iterations > 0:
-        bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
-        cv2.grabCut(bgr, trimap, None, bgd, fgd, s.grabcut_iterations, cv2.GC_INIT_WITH_MASK)
+    if s.grabcut_iterations > 0:
+        scale = min(1.0, GRABCUT_SIZE / length)
+        _grabcut_windows(bgr, trimap, int(np.ceil(s.extent_fraction * length)) + 2, s.grabcut_iterations, scale)
     fg = (trimap == cv2.GC_FGD) | (trimap == cv2.GC_PR_FGD)
     fg = (cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, _disk(1)) > 0) | (seeds > 0)
     parts, count = ndimage.label(fg)
