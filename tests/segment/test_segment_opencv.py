@@ -124,6 +124,10 @@ STUDY = {
         {"camera": {"width": 640, "height": 480}, "count": 10, "placement": {"extent": [0.6, 0.45]}},
         0,
     ),
+    "1600 x 1200, 10 copies": (
+        {"camera": {"width": 1600, "height": 1200}, "count": 10, "placement": {"extent": [0.6, 0.45]}},
+        0,
+    ),
 }
 
 

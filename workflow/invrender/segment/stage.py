@@ -88,11 +88,12 @@ def overlay(rgb: np.ndarray, ids: np.ndarray) -> np.ndarray:
         cv2.drawContours(out, contours, -1, colour.tolist(), max(1, scale // 2))
         dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
         y, x = np.unravel_index(int(np.argmax(dist)), dist.shape)
-        text, font, size = str(i), cv2.FONT_HERSHEY_SIMPLEX, 0.5 + 0.1 * scale
-        (w, h), _ = cv2.getTextSize(text, font, size, 2)
+        text, font, size = str(i), cv2.FONT_HERSHEY_SIMPLEX, max(0.6, out.shape[1] / 1280)
+        (w, h), _ = cv2.getTextSize(text, font, size, max(2, round(2 * size)))
         org = (int(x - w / 2), int(y + h / 2))
-        cv2.putText(out, text, org, font, size, (0, 0, 0), 4, cv2.LINE_AA)
-        cv2.putText(out, text, org, font, size, (255, 255, 255), 2, cv2.LINE_AA)
+        thick = max(2, round(2 * size))
+        cv2.putText(out, text, org, font, size, (0, 0, 0), 2 * thick, cv2.LINE_AA)
+        cv2.putText(out, text, org, font, size, (255, 255, 255), thick, cv2.LINE_AA)
     return out
 
 
