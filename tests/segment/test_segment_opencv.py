@@ -66,7 +66,7 @@ def test_copies_apart_are_found_with_their_extent(captures, tmp_path):
     report, found, truth = segment(captures["apart"], tmp_path / "seg")
     iou = matched_iou(found, truth)
     assert len(report["instances"]) == truth.max() == 6
-    # measured: mean 0.935, least 0.88
+    # measured: mean 0.941, least 0.87
     assert np.mean(list(iou.values())) >= 0.9 and min(iou.values()) >= 0.85, iou
     assert all(0.5 <= entry["score"] <= 1 for entry in report["instances"])
     for entry in report["instances"]:  # the table describes the mask
@@ -82,7 +82,7 @@ def test_touching_copies_are_split_not_merged(captures, tmp_path):
     assert pairs == {(1, 2), (4, 6)}  # the case this test is about is there
     iou = matched_iou(found, truth)
     assert len(report["instances"]) == 6
-    # measured: mean 0.773, least 0.64; a merged pair would leave one of its two near 0
+    # measured: mean 0.801, least 0.64; a merged pair would leave one of its two near 0
     assert np.mean(list(iou.values())) >= 0.72 and min(iou.values()) >= 0.6, iou
     for a, b in pairs:
         assert iou[a] >= 0.6 and iou[b] >= 0.6
@@ -95,7 +95,7 @@ def test_an_exemplar_box_guides_the_colours(captures, tmp_path):
     report, found, truth = segment(captures["apart"], tmp_path / "seg", exemplar=box)
     iou = matched_iou(found, truth)
     assert len(report["instances"]) == 6
-    assert np.mean(list(iou.values())) >= 0.9, iou  # measured: 0.937
+    assert np.mean(list(iou.values())) >= 0.9, iou  # measured: 0.944
 
 
 def test_the_same_photograph_gives_the_same_masks(captures, tmp_path):
@@ -160,4 +160,4 @@ def test_study_of_the_opencv_backend(tmp_path):
     print(
         f"all {len(every)} copies: mean IoU {np.mean(every):.3f}, IoU >= 0.5 for {np.mean(np.array(every) >= 0.5):.2f}"
     )
-    assert np.mean(every) >= 0.7  # measured: 0.74
+    assert np.mean(every) >= 0.72  # measured: 0.764

@@ -29,8 +29,8 @@ scenes.additionalProperties.properties, beside `capture`):
         minLength: 1
       exemplar:
         description: >-
-          `opencv`: a box around one copy, [x0, y0, x1, y1] in pixels: its colours and area
-          guide the search (without one: the colours the image's border lacks).
+          `opencv`: a box around one copy, [x0, y0, x1, y1] in pixels: its colours guide the
+          search (without one: the colours the image's border lacks).
         type: array
         items: {type: number, minimum: 0}
         minItems: 4
@@ -43,19 +43,74 @@ scenes.additionalProperties.properties, beside `capture`):
       opencv:
         description: >-
           `opencv` backend settings (invrender/segment/opencv.py, OpenCVSettings):
-          core_threshold, border_fraction, close_fraction, split_factor, min_area_fraction,
-          grabcut_iterations, convex.
+          core_threshold, likelihood_ratio, border_fraction, close_fraction, join_fraction,
+          split_factor, min_area_fraction, grabcut_iterations, extent_fraction, convex
+          (docs/segment.md).
         type: object
         default: {}
         additionalProperties: false
         properties:
-          core_threshold: {type: number, exclusiveMinimum: 0, exclusiveMaximum: 1}
-          border_fraction: {type: number, exclusiveMinimum: 0, exclusiveMaximum: 0.5}
-          close_fraction: {type: number, minimum: 0}
-          split_factor: {type: number, exclusiveMinimum: 1}
-          min_area_fraction: {type: number, minimum: 0}
-          grabcut_iterations: {type: integer, minimum: 0}
-          convex: {type: boolean}
+          core_threshold:
+            description: >-
+              First guess: a colour with P(c | border) / P(c) below this is the object's.
+            type: number
+            exclusiveMinimum: 0
+            exclusiveMaximum: 1
+            default: 0.3
+          likelihood_ratio:
+            description: >-
+              A colour is the object's where P(c | object) is above this times P(c | support).
+            type: number
+            exclusiveMinimum: 0
+            default: 2.0
+          border_fraction:
+            description: >-
+              Width of the border band that shows the support, of the shorter side.
+            type: number
+            exclusiveMinimum: 0
+            exclusiveMaximum: 0.5
+            default: 0.04
+          close_fraction:
+            description: >-
+              Closing radius over gaps in a copy's colours, of sqrt(expected area).
+            type: number
+            minimum: 0
+            default: 0.15
+          join_fraction:
+            description: >-
+              Pieces of one copy this far apart (of sqrt(expected area)) may join.
+            type: number
+            minimum: 0
+            default: 0.5
+          split_factor:
+            description: >-
+              A core of this many expected areas or more is touching copies, split.
+            type: number
+            exclusiveMinimum: 1
+            default: 1.5
+          min_area_fraction:
+            description: >-
+              Pieces below this share of the expected area are specks, dropped.
+            type: number
+            minimum: 0
+            default: 0.3
+          grabcut_iterations:
+            description: >-
+              GrabCut iterations for the parts in support-like colours; 0: none.
+            type: integer
+            minimum: 0
+            default: 5
+          extent_fraction:
+            description: >-
+              GrabCut may add pixels this far from a core, of sqrt(expected area).
+            type: number
+            minimum: 0
+            default: 0.4
+          convex:
+            description: >-
+              Each core's convex hull added to its instance (false: a non-convex object).
+            type: boolean
+            default: true
 """
 
 
@@ -128,9 +183,10 @@ def segment_options(wildcards):
     ):
         if value is not None:
             options.append(f"{flag} {shlex.quote(value)}")
-    if settings.get("exemplar") is not None:
-        options.append("--exemplar " + " ".join(map(str, settings["exemplar"])))
-    options.append(set_options(settings.get("opencv", {})))
+    if segment_backend(wildcards) == "opencv":
+        if settings.get("exemplar") is not None:
+            options.append("--exemplar " + " ".join(map(str, settings["exemplar"])))
+        options.append(set_options(settings.get("opencv", {})))
     return " ".join(option for option in options if option)
 
 

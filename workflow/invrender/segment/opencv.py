@@ -175,7 +175,10 @@ def _object_colours(lab, bgr, s: OpenCVSettings) -> np.ndarray:
         x0, y0, x1, y1 = (int(round(v)) for v in s.exemplar)
         inside = np.zeros(sample.shape, bool)
         inside[max(0, y0) : y1, max(0, x0) : x1] = True
-        sample = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations) | (sample & inside)
+        # GrabCut's pixels in colours the border shows about as often as the image (ratio near
+        # 1 / support share) are the support it took, not the copy's.
+        grabcut = _exemplar_object(bgr, s.exemplar, s.grabcut_iterations) & (ratio < 1.0)
+        sample = grabcut | (sample & inside)
     if not sample.any():
         return sample
     if s.exemplar is None:
