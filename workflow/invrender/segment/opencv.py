@@ -135,12 +135,20 @@ def _solidity(mask: np.ndarray) -> float:
 
 
 def _typical_area(labels: np.ndarray, areas: np.ndarray) -> float:
-    """The expected instance area: the median of the components of at least a fifth of the
-    largest (specks do not pull it down) that are convex like one copy (solidity of 0.85 or
-    more: copies touching at an angle do not pull it up); all of them if none is."""
-    big = np.flatnonzero(areas >= 0.2 * areas.max()) + 1
-    solid = [i for i in big if _solidity(labels == i) >= 0.85]
-    return float(np.median(areas[np.asarray(solid or big) - 1]))
+    """The expected instance area, from the components of at least a fifth of the largest
+    (specks do not count): the median of those convex like one copy (solidity 0.85 or more:
+    copies touching at an angle do not pull it up), lowered to the largest area of which the
+    components' areas are whole multiples (mean distance to the nearest multiple, at least one,
+    of 0.15 or less) when that is within 0.6 of it: pairs of boxes joined face to face are
+    convex, and where they are half the components the median alone counted them as one copy.
+    (Lower fits are refused: copies' cores vary with the view, and half a copy fits too.)"""
+    index = np.flatnonzero(areas >= 0.2 * areas.max()) + 1
+    solid = [i for i in index if _solidity(labels == i) >= 0.85]
+    median = float(np.median(areas[np.asarray(solid or index) - 1]))
+    big = areas[index - 1].astype(np.float64)
+    fitting = [a for a in big if np.mean(np.abs(big / a - np.maximum(1, np.round(big / a)))) <= 0.15]
+    fits = [a for a in fitting if 0.6 * median <= a <= median]
+    return float(max(fits)) if fits else median
 
 
 def _exemplar_object(bgr: np.ndarray, box, iterations: int) -> np.ndarray:
