@@ -5,11 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from invrender.cli import main
 from invrender.scene.atlas import rasterize_atlas
 from invrender.scene.format import load_scene
+from invrender.scene.images import write_mask
 
 # A 2-view, 32 x 24 room: the smallest capture the synthesize stage makes.
 SMALL_ROOM = {"atlas_resolution": 64, "cameras": {"count": 2, "width": 32, "height": 24}}
@@ -25,6 +27,7 @@ STAGES = [
     "import-usd",
     "edit",
     "evaluate",
+    "segment",
 ]
 
 
@@ -43,6 +46,9 @@ def build_inputs(root: Path) -> Path:
     write_room(root / "objroom", lambda path, radiance: None)
     truth = load_scene(root / "capture" / "ground_truth" / "scene")  # evaluate: the truth as its own recovery
     rasterize_atlas(truth.mesh, *truth.maps.atlas_shape).save(root / "truth_atlas.npz")
+    ids = np.zeros((24, 32), np.uint16)  # segment: three instances of the room's first view
+    ids[2:8, 2:10], ids[12:20, 4:12], ids[6:16, 20:30] = 4, 9, 2
+    write_mask(root / "ids.png", ids)
     return root
 
 
@@ -73,5 +79,6 @@ def args(stage: str, root: Path, out: Path) -> list[str]:
         "edit": ["--scene", scene, "--edits", root / "edits.yaml", "--spp", "1"],
         "evaluate": ["--scene", scene, "--truth", scene, "--atlas", root / "truth_atlas.npz", "--images"]
         + [capture / "images", "--holdout", "view_000.exr", "--spp", "1"],
+        "segment": [capture / "images" / "view_000.exr", "--backend", "provided", "--masks", root / "ids.png"],
     }[stage]
     return [stage, *map(str, tail), "--out", str(out)]

@@ -121,6 +121,21 @@ def cmd_geometry(args):
         sweep_stale(args.out)
 
 
+def cmd_segment(args):
+    from .segment import stage
+
+    stage.run(
+        args.image,
+        args.out,
+        backend=args.backend,
+        masks=args.masks,
+        table=args.table,
+        exemplar=args.exemplar,
+        min_instances=args.min_instances,
+        settings=_key_values(args.set),
+    )
+
+
 def cmd_gradients(args):
     from .gradients import stage
 
@@ -353,6 +368,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--threads", type=int, help="Poisson threads (default: the CPUs this process may use)")
     p.set_defaults(func=cmd_geometry)
+
+    p = stages.add_parser(
+        "segment", help="the copies of one object in one photograph -> masks/, instances.json, overlay.png"
+    )
+    p.add_argument("image", help="the photograph (EXR, PNG, JPEG)")
+    p.add_argument("--out", required=True, help="directory to write (masks/, instances.json, overlay.png)")
+    p.add_argument("--backend", choices=["opencv", "provided"], default="opencv")
+    p.add_argument("--masks", help="provided: a PNG of instance ids (0 = background) or a folder of one PNG each")
+    p.add_argument("--table", help="provided: JSON or CSV listing the ids the id image may hold")
+    p.add_argument(
+        "--exemplar", type=float, nargs=4, metavar=("X0", "Y0", "X1", "Y1"), help="opencv: a box around one copy"
+    )
+    p.add_argument("--min-instances", type=int, default=3, help="fewer stops the stage (at least 3)")
+    p.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="opencv setting (OpenCVSettings in segment/opencv.py)"
+    )
+    p.set_defaults(func=cmd_segment)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
