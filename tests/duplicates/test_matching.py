@@ -183,3 +183,121 @@ def test_sift_keypoints_in_colmap_pixels():
         f = extract(crop, "sift", rotations=False)
         nearest = np.linalg.norm(f.keypoints - np.array(spot), axis=1).min()
         assert nearest < 0.1, (spot, nearest)
+
+
+# ---------------------------------------------------------------------------- a rendered capture
+# Cans of a synthetic duplicates capture, cropped from the true instance masks, matched pair by
+# pair and scored against the true poses: python tests/duplicates/test_matching.py CAPTURE_DIR
+# (or the benchmark below, which renders one). Precision: matches whose b point lies within 3 crop
+# pixels of where a's surface point projects in b (and is visible there).
+
+CROP = 256
+
+
+def fixture_crops(capture) -> list[Crop]:
+    """Square crops around each true instance (1.1 x its box's longer side), masked, at CROP px."""
+    from invrender.scene.images import read_image
+
+    image = read_image(capture / "images" / "view_000.exr")
+    ids = cv2.imread(str(capture / "ground_truth" / "masks" / "view_000.png"), cv2.IMREAD_UNCHANGED)
+    crops = []
+    for i in range(1, int(ids.max()) + 1):
+        ys, xs = np.nonzero(ids == i)
+        centre = np.array([xs.min() + xs.max() + 1, ys.min() + ys.max() + 1]) / 2.0
+        side = 1.1 * max(xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min())
+        scale, offset = CROP / side, centre - side / 2.0
+        # crop xy = (full xy - offset) * scale in COLMAP pixels; warpAffine takes pixel indices
+        M = np.array([[scale, 0, scale * (0.5 - offset[0]) - 0.5], [0, scale, scale * (0.5 - offset[1]) - 0.5]])
+        img = cv2.warpAffine(image, M, (CROP, CROP), flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine((ids == i).astype(np.uint8), M, (CROP, CROP), flags=cv2.INTER_NEAREST) > 0
+        crops.append(Crop(i, img * mask[..., None], mask, offset, float(scale)))
+    return crops
+
+
+def first_hit(triangles: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Ray parameter t of each ray's nearest triangle (inf: a miss), by brute force over
+    (F, 3, 3) triangles (render/bvh.py's float64 Moller-Trumbore)."""
+    from invrender.render.bvh import _intersect_mt
+
+    a, b, c = (triangles[None, :, k] for k in range(3))
+    t = np.full(len(origins), np.inf)
+    for s in range(0, len(origins), 256):
+        o, d = origins[s : s + 256, None], directions[s : s + 256, None]
+        t[s : s + 256] = _intersect_mt(o, d, a, b, c).min(axis=1)
+    return t
+
+
+class Truth:
+    """Where a crop pixel of one instance lies on the object, and where that point appears in
+    another instance's crop: rays through the true camera cast at the true object mesh."""
+
+    def __init__(self, capture, crops):
+        import json
+
+        import trimesh  # reads the PLY
+
+        from invrender.scene.cameras import read_cameras
+
+        self.cam = read_cameras(capture / "sparse")[0]
+        poses = json.loads((capture / "ground_truth" / "poses.json").read_text())["instances"]
+        self.T = {p["instance_id"]: np.array(p["T_obj2world"], np.float64) for p in poses}
+        obj = trimesh.load(capture / "ground_truth" / "object.ply", process=False)
+        self.obj = np.asarray(obj.triangles, np.float64)
+        self.world = np.concatenate([self.obj @ T[:3, :3].T + T[:3, 3] for T in self.T.values()])
+        self.crops = {c.instance_id: c for c in crops}
+        self.centre = -self.cam.R.T @ self.cam.t
+
+    def rays(self, crop, xy):
+        (fx, fy), (cx, cy) = self.cam.focal, self.cam.principal_point
+        full = np.asarray(xy) / crop.scale + crop.offset
+        d_cam = np.stack([(full[:, 0] - cx) / fx, (full[:, 1] - cy) / fy, np.ones(len(full))], axis=1)
+        d = d_cam @ self.cam.R  # R^T d_cam
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def surface(self, ia, xy_a):
+        """(N, 3) object-frame points seen at crop a's pixels (NaN where the ray misses a)."""
+        T_inv = np.linalg.inv(self.T[ia])
+        d = self.rays(self.crops[ia], xy_a) @ T_inv[:3, :3].T
+        o = np.broadcast_to(T_inv[:3, :3] @ self.centre + T_inv[:3, 3], d.shape)
+        t = first_hit(self.obj, o, d)
+        return np.where(np.isfinite(t)[:, None], o + t[:, None] * d, np.nan)
+
+    def project(self, ib, p_obj):
+        """Crop b pixels of object points placed by instance b's pose, and whether each is the
+        first surface its camera ray meets (visible)."""
+        crop = self.crops[ib]
+        pw = p_obj @ self.T[ib][:3, :3].T + self.T[ib][:3, 3]
+        pc = pw @ self.cam.R.T + self.cam.t
+        (fx, fy), (cx, cy) = self.cam.focal, self.cam.principal_point
+        full = np.stack([fx * pc[:, 0] / pc[:, 2] + cx, fy * pc[:, 1] / pc[:, 2] + cy], axis=1)
+        xy = (full - crop.offset) * crop.scale
+        visible = np.zeros(len(pw), bool)
+        ok = np.flatnonzero(np.isfinite(pw).all(axis=1))
+        if len(ok):
+            d = pw[ok] - self.centre
+            dist = np.linalg.norm(d, axis=1)
+            hit = first_hit(self.world, np.broadcast_to(self.centre, d.shape), d / dist[:, None])
+            visible[ok] = hit > dist - 1e-4
+        return xy, visible
+
+    def errors(self, ia, ib, xy_a, xy_b):
+        """Per match: distance (crop b pixels) from the true position, inf where the true point is
+        hidden in b or a's ray misses its object."""
+        truth, visible = self.project(ib, self.surface(ia, xy_a))
+        err = np.linalg.norm(np.asarray(xy_b) - truth, axis=1)
+        return np.where(visible & np.isfinite(err), err, np.inf)
+
+    def inplane_angle(self, ia, ib, spacing=6):
+        """The true turn of b onto a: the rotation of a 2D Procrustes fit of a's mask pixels (on a
+        grid) to their true positions in b, over the points visible in both; None below 30."""
+        crop = self.crops[ia]
+        ys, xs = np.mgrid[spacing // 2 : CROP : spacing, spacing // 2 : CROP : spacing]
+        grid = np.stack([xs.ravel(), ys.ravel()], axis=1) + 0.5
+        grid = grid[crop.mask[ys.ravel(), xs.ravel()]]
+        truth, visible = self.project(ib, self.surface(ia, grid))
+        ok = visible & np.isfinite(truth).all(axis=1)
+        if ok.sum() < 30:
+            return None
+        pa, pb = grid[ok] - grid[ok].mean(0), truth[ok] - truth[ok].mean(0)
+        H = pb.T @ pa  # maximise sum a . R b
+        return float(np.degrees(np.arctan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])))
