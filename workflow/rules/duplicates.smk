@@ -19,12 +19,6 @@ def instance_masks(wildcards):
     return f"results/{wildcards.scene}/segmentation/masks/{photograph_stem(wildcards.scene)}.png"
 
 
-def instance_ids(wildcards):
-    """The ids the segment checkpoint found."""
-    path = Path(segmentation_dir(wildcards), "instances.json")
-    return [entry["id"] for entry in json.loads(path.read_text())["instances"]]
-
-
 def instance_files(suffix):
     """The per-instance files of duplicates_crop (results/{scene}/crops/: a sibling of the solve
     step's folder, which may not contain another rule's outputs)."""
@@ -32,7 +26,7 @@ def instance_files(suffix):
     def function(wildcards):
         return [
             f"results/{wildcards.scene}/crops/instance_{i:03d}{suffix}"
-            for i in instance_ids(wildcards)
+            for i in segmented_instances(wildcards)
         ]
 
     return function

@@ -3,114 +3,7 @@ photograph, as results/{scene}/segmentation/ (masks/<image stem>.png, instances.
 overlay.png). A checkpoint: how many instances there are, and so the per-instance jobs
 downstream, is known only once it has run (segmented_instances below).
 
-Its settings, per scene, for workflow/schemas/config.schema.yaml (under
-scenes.additionalProperties.properties, beside `capture`):
-
-  segment:
-    description: >-
-      The `segment` checkpoint (`invrender segment`, duplicates scenes): the copies of the
-      object in the photograph, as an instance-id PNG, instances.json and an overlay
-      (`docs/segment.md`).
-    type: object
-    additionalProperties: false
-    default: {}
-    properties:
-      backend:
-        description: >-
-          `opencv`: found in the photograph, no downloaded weights; `provided`: the masks
-          `capture.masks` names (a synthetic scene: its true masks, for testing what follows).
-        enum: [opencv, provided]
-        default: opencv
-      table:
-        description: >-
-          `provided`, with an id image: JSON or CSV listing the ids it may hold (relative to
-          the capture directory); an id beyond it stops the stage.
-        type: string
-        minLength: 1
-      exemplar:
-        description: >-
-          `opencv`: a box around one copy, [x0, y0, x1, y1] in pixels: its colours guide the
-          search (without one: the colours the image's border lacks).
-        type: array
-        items: {type: number, minimum: 0}
-        minItems: 4
-        maxItems: 4
-      min_instances:
-        description: Fewer instances found stops the stage (the duplicates mode needs 3).
-        type: integer
-        minimum: 3
-        default: 3
-      opencv:
-        description: >-
-          `opencv` backend settings (invrender/segment/opencv.py, OpenCVSettings):
-          core_threshold, likelihood_ratio, border_fraction, close_fraction, join_fraction,
-          split_factor, min_area_fraction, grabcut_iterations, extent_fraction, convex
-          (docs/segment.md).
-        type: object
-        default: {}
-        additionalProperties: false
-        properties:
-          core_threshold:
-            description: >-
-              First guess: a colour with P(c | border) / P(c) below this is the object's.
-            type: number
-            exclusiveMinimum: 0
-            exclusiveMaximum: 1
-            default: 0.3
-          likelihood_ratio:
-            description: >-
-              A colour is the object's where P(c | object) is above this times P(c | support).
-            type: number
-            exclusiveMinimum: 0
-            default: 2.0
-          border_fraction:
-            description: >-
-              Width of the border band that shows the support, of the shorter side.
-            type: number
-            exclusiveMinimum: 0
-            exclusiveMaximum: 0.5
-            default: 0.04
-          close_fraction:
-            description: >-
-              Closing radius over gaps in a copy's colours, of sqrt(expected area).
-            type: number
-            minimum: 0
-            default: 0.15
-          join_fraction:
-            description: >-
-              Pieces of one copy this far apart (of sqrt(expected area)) may join.
-            type: number
-            minimum: 0
-            default: 0.5
-          split_factor:
-            description: >-
-              A core of this many expected areas or more is touching copies, split.
-            type: number
-            exclusiveMinimum: 1
-            default: 1.5
-          min_area_fraction:
-            description: >-
-              Pieces below this share of the expected area are specks, dropped.
-            type: number
-            minimum: 0
-            default: 0.3
-          grabcut_iterations:
-            description: >-
-              GrabCut iterations for the parts in support-like colours; 0: none.
-            type: integer
-            minimum: 0
-            default: 5
-          extent_fraction:
-            description: >-
-              GrabCut may add pixels this far from a core, of sqrt(expected area).
-            type: number
-            minimum: 0
-            default: 0.4
-          convex:
-            description: >-
-              Each core's convex hull added to its instance (false: a non-convex object).
-            type: boolean
-            default: true
+Its settings, per scene, are `scenes.<name>.segment` in workflow/schemas/config.schema.yaml.
 """
 
 
@@ -127,10 +20,7 @@ def segment_image(wildcards):
     or the user's (`capture.image`, else the one image in images/)."""
     if is_synthetic(wildcards.scene):
         return os.path.join(capture_dir(wildcards), "images", "view_000.exr")
-    capture = SCENES[wildcards.scene]["capture"]
-    if "image" in capture:
-        return os.path.join(capture["path"], capture["image"])
-    return str(photographs(Path(capture["path"], "images"))[0])
+    return str(photograph(wildcards.scene))
 
 
 def segment_masks(wildcards):

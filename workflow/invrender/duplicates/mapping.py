@@ -43,6 +43,7 @@ class Registration:
     points: np.ndarray  # (P, 3) object frame
     reconstruction: pycolmap.Reconstruction | None
     verified_pairs: dict[tuple[int, int], int] = field(default_factory=dict)  # inlier count per pair
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # of the poses' frame in COLMAP's
 
 
 class _Keypoints:

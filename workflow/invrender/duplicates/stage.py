@@ -185,9 +185,14 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
     }
 
 
-def _carve(ids, poses, K, points, settings: Settings):
-    bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_poses(ids, poses, K)
-    return hull.hull_mesh(ids, poses, K, bounds, resolution=settings.hull_resolution, faces=settings.hull_faces)
+def _carve(ids, poses, K, points, settings: Settings) -> Mesh:
+    """The visual hull of the posed masks; its bounds from COLMAP's points while they are the
+    best guess, else from the masks' cones."""
+    bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
+    mesh, _ = hull.visual_hull(
+        ids, poses, K, bounds, resolution=settings.hull_resolution, target_faces=settings.hull_faces
+    )
+    return mesh
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -209,6 +214,13 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
             f"{len(registration.poses)} (unregistered: {registration.unregistered})",
         )
     mesh = _carve(ids, registration.poses, K, registration.points, settings)
+    # COLMAP's origin can lie anywhere, even behind the camera: the object frame starts at the
+    # hull's centroid, so every pose's translation is the object's centre in the camera
+    centre = mesh.positions.astype(np.float64).mean(axis=0)
+    registration.poses = {i: reframe(T, centre, 1.0) for i, T in registration.poses.items()}
+    registration.points = registration.points - centre
+    registration.origin = centre
+    mesh = Mesh((mesh.positions - centre).astype(np.float32), mesh.faces, uvs=None)
     poses, rounds = dict(registration.poses), []
     if settings.refine:
         poses, mesh, rounds = _refine_rounds(photo, ids, K, poses, mesh, registration, settings)
@@ -229,14 +241,21 @@ def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings)
     rounds, best = [], None
     unregistered = list(registration.unregistered)
     for k in range(settings.refine_rounds):
-        result = refine.refine_poses(mesh, K, ids, photo, poses, unregistered=unregistered)
-        residual = float(np.mean(list(result.residual_after.values())))
-        rounds.append({"round": k, **result.summary()})
+        result = refine.refine_poses(mesh, K, ids, photo, poses, unregistered=unregistered, seed=settings.seed)
+        residual = float(np.nanmean(list(result.residual_after.values())))
+        rounds.append({"round": k, "mean_residual": residual, **_summary(result)})
         if best is not None and residual >= best:
             break
         best, poses, unregistered = residual, result.poses, []
         mesh = _carve(ids, poses, K, np.zeros((0, 3)), settings)
     return poses, mesh, rounds
+
+
+def _summary(result) -> dict:
+    """A refinement round for duplicates.json."""
+    keys = ("residual_before", "residual_after", "silhouette_before", "silhouette_after", "evaluations", "seconds")
+    out = {key: {str(i): float(v) for i, v in getattr(result, key).items()} for key in keys}
+    return {**out, "reinitialised": list(result.reinitialised), "initialised": list(result.initialised)}
 
 
 def run_solve(
@@ -280,7 +299,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
     write_poses(tmp / "poses_colmap.json", poses_document(before, listed, world_from_cam, note, "COLMAP"))
     source = "COLMAP, refined by render-and-compare" if settings.refine else "COLMAP"
     write_poses(tmp / "poses.json", poses_document(after, listed, world_from_cam, note, source))
-    mapping.write_model(registration, tmp / "sparse", centre, scale)
+    mapping.write_model(registration, tmp / "sparse", registration.origin + centre, scale)
     write_overlay(tmp / "overlay.png", photo, mesh, K, after)
     report = {
         "settings": asdict(settings),
