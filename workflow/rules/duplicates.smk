@@ -54,7 +54,7 @@ rule duplicates_crop:
     wildcard_constraints:
         instance=r"\d+",
     conda:
-        "../../envs/geometry.yaml"
+        "../../envs/workflow.yaml"
     group:
         "duplicates_crops"
     threads: 1
@@ -93,7 +93,7 @@ rule duplicates:
     benchmark:
         "results/{scene}/benchmarks/duplicates.tsv"
     conda:
-        "../../envs/geometry.yaml"
+        "../../envs/workflow.yaml"
     threads: 1
     resources:
         mem_mb=4000,
