@@ -31,6 +31,7 @@ import dataclasses
 import itertools
 import json
 import logging
+import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -211,7 +212,8 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
             "duplicates",
             "registration",
             f"COLMAP to register at least 2 of the {len(crops)} instances; it registered "
-            f"{len(registration.poses)} (unregistered: {registration.unregistered})",
+            f"{len(registration.poses)} (unregistered: {registration.unregistered}; "
+            f"{len(registration.verified_pairs)} pairs passed geometric verification)",
         )
     mesh = _carve(ids, registration.poses, K, registration.points, settings)
     # COLMAP's origin can lie anywhere, even behind the camera: the object frame starts at the
@@ -283,6 +285,8 @@ def run_solve(
     with atomic_dir(out_dir, kind="duplicates") as tmp:
         found = solve(photo, ids, K, crops, features, tmp / "colmap", settings, progress)
         report = _write(tmp, found, camera, K, photo, ids, listed, settings)
+        # keep COLMAP's database (its matches open in COLMAP's GUI); its models are sparse/ now
+        shutil.rmtree(tmp / "colmap" / "models", ignore_errors=True)
     log.info("duplicates: %d of %d instances placed -> %s", len(found["poses"]), len(listed), out_dir)
     return report
 

@@ -1,0 +1,98 @@
+"""duplicates/stage.py: what it refuses, with one message naming the file, the field and what was
+expected, and nothing written. (The whole pipeline runs in tests/workflow and the benchmark.)"""
+
+import json
+
+import numpy as np
+import pytest
+
+from invrender.duplicates import stage
+from invrender.scene.cameras import write_colmap_text
+from invrender.scene.images import write_exr, write_mask
+from invrender.scene.types import Camera, SceneError
+
+
+@pytest.fixture
+def photo(tmp_path):
+    """A black photograph (nothing to match) with four square instances, and its camera."""
+    cameras = tmp_path / "cameras"
+    (cameras / "images").mkdir(parents=True)
+    camera = Camera("photo.exr", "PINHOLE", 160, 120, np.array([150.0, 150, 80, 60]), np.eye(3), np.zeros(3))
+    write_colmap_text(cameras, [camera])
+    write_exr(cameras / "images" / "photo.exr", np.zeros((120, 160, 3), np.float32))
+    ids = np.zeros((120, 160), np.uint16)
+    for k, (x, y) in enumerate([(10, 10), (60, 10), (110, 10), (60, 70)], 1):
+        ids[y : y + 30, x : x + 30] = k
+    write_mask(tmp_path / "ids.png", ids)
+    instances = {"instances": [{"id": k} for k in range(1, 5)]}
+    (tmp_path / "instances.json").write_text(json.dumps(instances))
+    return tmp_path
+
+
+def settings(**values):
+    return stage.settings_from({"matcher": "sift", "step_deg": 90.0, "crop_size": 64, **values})
+
+
+def crop_all(root, ids=range(1, 5)):
+    (root / "crops").mkdir(exist_ok=True)
+    for k in ids:
+        stage.run_crop(
+            root / "cameras",
+            root / "ids.png",
+            k,
+            root / "crops" / f"instance_{k:03d}.npz",
+            root / "crops" / f"instance_{k:03d}.features.npz",
+            settings(),
+        )
+
+
+def solve(root):
+    return stage.run_solve(
+        root / "cameras",
+        root / "ids.png",
+        root / "instances.json",
+        root / "crops",
+        root / "crops",
+        root / "out",
+        settings(),
+        progress=False,
+    )
+
+
+def test_fewer_than_three_instances_stop_with_what_was_found(photo):
+    (photo / "instances.json").write_text(json.dumps({"instances": [{"id": 1}, {"id": 2}]}))
+    with pytest.raises(SceneError, match=r"instances.*at least 3 instances of the object; found 2"):
+        solve(photo)
+    assert not (photo / "out").exists()
+
+
+def test_no_matches_between_crops_stop_the_stage(photo):
+    crop_all(photo)
+    with pytest.raises(SceneError, match="matches between some of the 4 crops; found none in any pair"):
+        solve(photo)
+    assert not (photo / "out").exists()
+
+
+def test_masks_of_another_size_than_the_photograph_are_refused(photo):
+    write_mask(photo / "ids.png", np.ones((60, 80), np.uint16))
+    with pytest.raises(SceneError, match=r"ids.png.*size.*160 x 120, got 80 x 60"):
+        crop_all(photo, ids=[1])
+
+
+def test_an_unknown_setting_or_matcher_is_named():
+    with pytest.raises(SceneError, match="colour_space"):
+        stage.settings_from({"colour_space": "srgb"})
+    with pytest.raises(SceneError, match="matcher.*sift, xfeat.*'orb'"):
+        stage.settings_from({"matcher": "orb"})
+
+
+def test_the_object_frame_moves_poses_with_the_mesh():
+    """reframe: p_colmap = centre + scale * p_obj; the camera sees the same point."""
+    rng = np.random.default_rng(0)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = q * np.sign(np.linalg.det(q)), [0.1, -0.2, 3.0]
+    centre, scale, p_obj = np.array([0.3, 0.1, -0.2]), 2.5, rng.normal(size=3)
+    p_cam = T[:3, :3] @ (centre + scale * p_obj) + T[:3, 3]
+    T2 = stage.reframe(T, centre, scale)
+    np.testing.assert_allclose(T2[:3, :3] @ p_obj + T2[:3, 3], p_cam / scale)
