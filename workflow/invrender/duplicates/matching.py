@@ -373,14 +373,18 @@ def match_pair(
     matcher: str,
     rotation_search: bool = True,
     window: int = 3,
-    batch: bool = True,
+    batch: bool = False,
     fundamental_px: float | None = None,
+    min_score: float | None = None,
 ) -> PairMatch:
     """a at angle 0 against b at every angle; counts smoothed by a circular running average of
     ``window`` steps; argmax; b's correspondences rotated back. ``rotation_search=False`` (the
-    ablation) matches b at 0 degrees only. ``fundamental_px``: keep only the chosen angle's
-    matches within this epipolar distance of a RANSAC fundamental matrix (None: raw matches; COLMAP
-    verifies geometry again). ``batch`` runs LighterGlue's angles as one batch (False: one by one)."""
+    ablation) matches b at 0 degrees only. Optional filters of the chosen angle's matches (the
+    counts stay raw): ``min_score`` keeps matches at least this confident (LighterGlue's score,
+    SIFT's 1 - ratio); ``fundamental_px`` keeps those within this epipolar distance of a RANSAC
+    fundamental matrix. None: raw matches (COLMAP verifies geometry again). ``batch`` runs
+    LighterGlue's angles as one batch, every angle cut to the fewest keypoints (default: one by
+    one with all keypoints, as fast here: docs/duplicates.md)."""
     _check_matcher(matcher)
     for f in (a, b):
         if f.matcher != matcher or f.angles_deg[0] != 0.0:
@@ -399,6 +403,9 @@ def match_pair(
     pairs, scores = found[best]
     xy_a = a.keypoints[a.at(0)][pairs[:, 0]]
     xy_b = b.keypoints[b.at(ks[best])][pairs[:, 1]]
+    if min_score is not None:
+        keep = scores >= min_score
+        xy_a, xy_b, scores = xy_a[keep], xy_b[keep], scores[keep]
     if fundamental_px is not None:
         keep = fundamental_inliers(xy_a, xy_b, fundamental_px)
         xy_a, xy_b, scores = xy_a[keep], xy_b[keep], scores[keep]
