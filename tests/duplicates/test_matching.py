@@ -15,6 +15,7 @@ from invrender.duplicates.matching import (
     extract,
     fundamental_inliers,
     match_pair,
+    neighbour_consistent,
     rotate_image,
     rotate_points,
     smooth_counts,
@@ -110,6 +111,12 @@ def test_filters_keep_the_true_matches(features):
     planted[::4] = True
     keep = fundamental_inliers(raw.xy_a, xy_b, 2.0)
     assert keep[good & ~planted].mean() > 0.9 and keep[planted].mean() < 0.2, (keep[good].mean(), keep[planted].mean())
+    # neighbour consistency, on b turned like a (the true turn): the planted matches disagree
+    turned_b = rotate_points(xy_b, 110.0, (S / 2, S / 2), (S / 2, S / 2))
+    keep = neighbour_consistent(raw.xy_a, turned_b, radius_px=4.0)
+    assert keep[good & ~planted].mean() > 0.8 and keep[planted].mean() < 0.1, (keep[good].mean(), keep[planted].mean())
+    consistent = match_pair(a, b, "xfeat", consistency_px=4.0)
+    assert len(consistent.xy_a) > 0.6 * len(raw.xy_a)
 
 
 def test_batched_angles_match_one_by_one(features):
