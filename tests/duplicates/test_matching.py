@@ -349,7 +349,7 @@ def measure(capture, matchers=("sift", "xfeat"), step_deg=4.0, **match_options) 
             }
             per_pair = (time.perf_counter() - start) / len(pairs)
             err = {p: truth.errors(*p, pm.xy_a, pm.xy_b) for p, pm in found.items()}
-            full_px = {p: err[p] * truth.crops[p[1]].scale for p in pairs}  # crop b px -> full-image px
+            full_px = {p: err[p] / truth.crops[p[1]].scale for p in pairs}  # crop b px -> full-image px
             n = sum(len(e) for e in err.values())
             gaps = [angle_gap(found[p].angle_deg, a) for p, a in true_angle.items() if a is not None]
             rows.append(
