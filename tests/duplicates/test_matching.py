@@ -13,7 +13,9 @@ from invrender.duplicates.matching import (
     CropFeatures,
     canvas_size,
     extract,
+    fundamental_inliers,
     match_pair,
+    neighbour_consistent,
     rotate_image,
     rotate_points,
     smooth_counts,
@@ -93,6 +95,28 @@ def test_matchers_need_the_search(features, matcher):
     assert upright.angle_deg == 0.0 and len(upright.counts) == 1
     assert angle_gap(searched.angle_deg, 90.0) <= 20.0
     assert len(searched.xy_a) > 3 * len(upright.xy_a), (len(searched.xy_a), len(upright.xy_a))
+
+
+def test_filters_keep_the_true_matches(features):
+    """min_score keeps the confident subset; the fundamental-matrix RANSAC keeps nearly all of a
+    pair that is one rigid turn (every match consistent) and drops planted outliers."""
+    a, b = features["xfeat"][0], features["xfeat"][110]
+    raw = match_pair(a, b, "xfeat")
+    confident = match_pair(a, b, "xfeat", min_score=0.5)
+    assert 0 < len(confident.xy_a) < len(raw.xy_a) and confident.scores.min() >= 0.5
+    good = np.linalg.norm(raw.xy_a - true_xy_a(raw.xy_b, 110.0), axis=1) < 2.0
+    xy_b = raw.xy_b.copy()
+    xy_b[::4] = np.random.default_rng(1).uniform(20, S - 20, xy_b[::4].shape)  # a quarter made wrong
+    planted = np.zeros(len(xy_b), bool)
+    planted[::4] = True
+    keep = fundamental_inliers(raw.xy_a, xy_b, 2.0)
+    assert keep[good & ~planted].mean() > 0.9 and keep[planted].mean() < 0.2, (keep[good].mean(), keep[planted].mean())
+    # neighbour consistency, on b turned like a (the true turn): the planted matches disagree
+    turned_b = rotate_points(xy_b, 110.0, (S / 2, S / 2), (S / 2, S / 2))
+    keep = neighbour_consistent(raw.xy_a, turned_b, radius_px=4.0)
+    assert keep[good & ~planted].mean() > 0.8 and keep[planted].mean() < 0.1, (keep[good].mean(), keep[planted].mean())
+    consistent = match_pair(a, b, "xfeat", consistency_px=4.0)
+    assert len(consistent.xy_a) > 0.6 * len(raw.xy_a)
 
 
 def test_batched_angles_match_one_by_one(features):
@@ -301,3 +325,73 @@ class Truth:
         pa, pb = grid[ok] - grid[ok].mean(0), truth[ok] - truth[ok].mean(0)
         H = pb.T @ pa  # maximise sum a . R b
         return float(np.degrees(np.arctan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])))
+
+
+def measure(capture, matchers=("sift", "xfeat"), step_deg=4.0, **match_options) -> list[dict]:
+    """Per matcher, with and without the search: matches, precision (within 3 crop px, and within
+    3 full-image px), the chosen angle's error against the true turn, seconds per crop and per pair."""
+    import itertools
+    import time
+
+    crops = fixture_crops(capture)
+    truth = Truth(capture, crops)
+    pairs = list(itertools.combinations([c.instance_id for c in crops], 2))
+    true_angle = {p: truth.inplane_angle(*p) for p in pairs}
+    rows = []
+    for matcher in matchers:
+        start = time.perf_counter()
+        feats = {c.instance_id: extract(c, matcher, step_deg=step_deg) for c in crops}
+        per_crop = (time.perf_counter() - start) / len(crops)
+        for search in (True, False):
+            start = time.perf_counter()
+            found = {
+                p: match_pair(feats[p[0]], feats[p[1]], matcher, rotation_search=search, **match_options) for p in pairs
+            }
+            per_pair = (time.perf_counter() - start) / len(pairs)
+            err = {p: truth.errors(*p, pm.xy_a, pm.xy_b) for p, pm in found.items()}
+            full_px = {p: err[p] / truth.crops[p[1]].scale for p in pairs}  # crop b px -> full-image px
+            n = sum(len(e) for e in err.values())
+            gaps = [angle_gap(found[p].angle_deg, a) for p, a in true_angle.items() if a is not None]
+            rows.append(
+                {
+                    "matcher": matcher,
+                    "search": search,
+                    "matches": n,
+                    "precision_3px_crop": sum(int((e < 3).sum()) for e in err.values()) / max(n, 1),
+                    "precision_3px_full": sum(int((e < 3).sum()) for e in full_px.values()) / max(n, 1),
+                    "angle_error_median": float(np.median(gaps)),
+                    "angle_within_8deg": float(np.mean(np.array(gaps) <= 8.0)),
+                    "seconds_per_crop": per_crop,
+                    "seconds_per_pair": per_pair,
+                }
+            )
+    return rows
+
+
+@pytest.mark.benchmark
+def test_precision_on_rendered_cans(tmp_path):
+    """Ten cans at 640 x 480 (64 spp), cropped at 256 px: the table of docs/duplicates.md."""
+    import json
+    import subprocess
+    import sys
+
+    config = tmp_path / "cans.json"
+    config.write_text(
+        json.dumps({"camera": {"width": 640, "height": 480}, "count": 10, "placement": {"extent": [0.6, 0.4]}})
+    )
+    capture = tmp_path / "cans"
+    cmd = [sys.executable, "-m", "invrender.cli", "synthesize", "duplicates", "--out", str(capture), "--spp", "64"]
+    subprocess.run([*cmd, "--config", str(config)], check=True)
+    rows = measure(capture)
+    for r in rows:
+        print(r)
+    xfeat = {r["search"]: r for r in rows if r["matcher"] == "xfeat"}
+    assert xfeat[True]["matches"] > xfeat[False]["matches"]
+
+
+if __name__ == "__main__":
+    import sys
+    from pathlib import Path
+
+    for row in measure(Path(sys.argv[1])):
+        print(row)

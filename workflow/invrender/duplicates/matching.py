@@ -47,6 +47,7 @@ __all__ = [
     "canvas_size",
     "smooth_counts",
     "fundamental_inliers",
+    "neighbour_consistent",
 ]
 
 MATCHERS = ("sift", "xfeat")
@@ -367,20 +368,43 @@ def fundamental_inliers(xy_a: np.ndarray, xy_b: np.ndarray, threshold_px: float 
     return keep if F is None or inl is None else inl.ravel().astype(bool)
 
 
+def neighbour_consistent(xy_a: np.ndarray, xy_b: np.ndarray, k: int = 8, radius_px: float = 4.0) -> np.ndarray:
+    """Matches whose displacement xy_b - xy_a agrees (within radius_px) with that of at least half
+    of their k nearest matches in a. Give b's points at the chosen angle (turned like a), where a
+    true match field is smooth; a match slid around a symmetric object (a can's twist about its
+    axis, the bulk of the wrong matches on the cans) disagrees with its neighbours. Fewer than
+    k + 1 matches: all kept."""
+    keep = np.ones(len(xy_a), bool)
+    if len(xy_a) <= k:
+        return keep
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(xy_a).query(xy_a, k=k + 1)
+    v = np.asarray(xy_b) - np.asarray(xy_a)
+    agree = np.linalg.norm(v[idx[:, 1:]] - v[:, None], axis=2) < radius_px
+    return agree.mean(axis=1) >= 0.5
+
+
 def match_pair(
     a: CropFeatures,
     b: CropFeatures,
     matcher: str,
     rotation_search: bool = True,
     window: int = 3,
-    batch: bool = True,
+    batch: bool = False,
     fundamental_px: float | None = None,
+    min_score: float | None = None,
+    consistency_px: float | None = None,
 ) -> PairMatch:
     """a at angle 0 against b at every angle; counts smoothed by a circular running average of
     ``window`` steps; argmax; b's correspondences rotated back. ``rotation_search=False`` (the
-    ablation) matches b at 0 degrees only. ``fundamental_px``: keep only the chosen angle's
-    matches within this epipolar distance of a RANSAC fundamental matrix (None: raw matches; COLMAP
-    verifies geometry again). ``batch`` runs LighterGlue's angles as one batch (False: one by one)."""
+    ablation) matches b at 0 degrees only. Optional filters of the chosen angle's matches (the
+    counts stay raw): ``min_score`` keeps matches at least this confident (LighterGlue's score,
+    SIFT's 1 - ratio); ``fundamental_px`` keeps those within this epipolar distance of a RANSAC
+    fundamental matrix; ``consistency_px`` keeps those whose displacement agrees with their
+    neighbours' (``neighbour_consistent``). None: raw matches (COLMAP verifies geometry again). ``batch`` runs
+    LighterGlue's angles as one batch, every angle cut to the fewest keypoints (default: one by
+    one with all keypoints, as fast here: docs/duplicates.md)."""
     _check_matcher(matcher)
     for f in (a, b):
         if f.matcher != matcher or f.angles_deg[0] != 0.0:
@@ -399,6 +423,16 @@ def match_pair(
     pairs, scores = found[best]
     xy_a = a.keypoints[a.at(0)][pairs[:, 0]]
     xy_b = b.keypoints[b.at(ks[best])][pairs[:, 1]]
+    if consistency_px is not None:
+        keep = neighbour_consistent(
+            a.keypoints_rot[a.at(0)][pairs[:, 0]],
+            b.keypoints_rot[b.at(ks[best])][pairs[:, 1]],
+            radius_px=consistency_px,
+        )
+        xy_a, xy_b, scores = xy_a[keep], xy_b[keep], scores[keep]
+    if min_score is not None:
+        keep = scores >= min_score
+        xy_a, xy_b, scores = xy_a[keep], xy_b[keep], scores[keep]
     if fundamental_px is not None:
         keep = fundamental_inliers(xy_a, xy_b, fundamental_px)
         xy_a, xy_b, scores = xy_a[keep], xy_b[keep], scores[keep]
