@@ -407,8 +407,9 @@ def _axis_sweep(problem: _Problem, T: np.ndarray, degrees, level: int = 0) -> np
 
 
 # Rotations spread over all of SO(3) (the icosahedral group: 60, none further than about 40
-# degrees from any rotation), candidates besides the borrowed ones: with few instances posed,
-# none of theirs may be near this one's.
+# degrees from any rotation), candidates when the borrowed ones all fail: with few instances
+# posed, none of theirs may be near this one's. Not together with them: scored at the coarse
+# level, 60 more candidates pushed the right borrowed one out of the few refined.
 SPREAD = list(Rotation.create_group("I").as_matrix())
 
 FULL_TURN = np.arange(15, 360, 15)  # degrees: re-initialisation
@@ -445,6 +446,17 @@ def _turned(T: np.ndarray, R_obj: np.ndarray) -> np.ndarray:
     out = T.copy()
     out[:3, :3] = T[:3, :3] @ R_obj
     return out
+
+
+def _reinitialise(problem: _Problem, rotations, depth: float, keep, count: int, iterations: int) -> np.ndarray:
+    """The best pose from ``rotations`` placed on the mask (scored at the coarse level, the best
+    ``count`` refined, with the poses in ``keep``), searched in turns about its axes and refined
+    again."""
+    placed = [_place(problem, R, depth, 0) for R in rotations]
+    scored = sorted(placed, key=lambda T: problem.cost(T, 0)[0])[:count] + list(keep)
+    results = [problem.refine(T, None, iterations) for T in scored]
+    best = min(results, key=lambda T: problem.cost(T)[0])
+    return problem.refine(_axis_sweep(problem, best, FULL_TURN), None, iterations)
 
 
 def _candidates(rotations: list[np.ndarray], tolerance_deg: float = 10.0) -> list[np.ndarray]:
@@ -579,22 +591,20 @@ def refine_poses(
         start = time.perf_counter()
         p = problem(i, posed)
         own = [current[i][:3, :3]] if i in current else []
-        rotations = _candidates(own + [current[j][:3, :3] for j in posed if j != i]) + SPREAD
+        borrowed = _candidates(own + [current[j][:3, :3] for j in posed if j != i])
         depth = float(np.median([current[j][2, 3] for j in posed]))
-        placed = [_place(p, R, depth, 0) for R in rotations]
-        scored = sorted(placed, key=lambda T: p.cost(T, 0)[0])[:refine_candidates]
-        if i in current:
-            scored.append(current[i])
-        results = [p.refine(T, None, iterations) for T in scored]
-        best = min(results, key=lambda T: p.cost(T)[0])
-        best = p.refine(_axis_sweep(p, best, FULL_TURN), None, iterations)
+        keep = [current[i]] if i in current else []
+        best = _reinitialise(p, borrowed, depth, keep, refine_candidates, iterations)
+        cost, tried = p.cost(best)[0], len(borrowed)
+        if cost > threshold:  # none of the borrowed rotations was near: try all around
+            spread = _reinitialise(p, SPREAD, depth, [best], refine_candidates, iterations)
+            cost, best, tried = p.cost(spread)[0], spread, tried + len(SPREAD)
         current[i] = best
-        cost = p.cost(best)[0]
         if cost <= threshold:  # posed well enough to lend its rotation to the next ones
             posed.append(i)
         evaluations[i] += p.evaluations
         seconds[i] += time.perf_counter() - start
-        log.append(f"instance {i}: {len(rotations)} candidate rotations, best cost {cost:.4f}")
+        log.append(f"instance {i}: {tried} candidate rotations, best cost {cost:.4f}")
     # Once more, every instance against the corrected ones.
     everyone = registered + unregistered
     for _ in range(photometric_passes):
