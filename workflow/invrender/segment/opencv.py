@@ -112,14 +112,28 @@ def _areas(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, stats[1:, cv2.CC_STAT_AREA]
 
 
+def _split_by_position(blob: np.ndarray, k: int) -> np.ndarray:
+    """A blob with no neck cut into k by k-means on its pixels' positions: straight cuts across
+    its long side, right for equal copies side by side."""
+    ys, xs = np.nonzero(blob)
+    points = np.stack([xs, ys], axis=1).astype(np.float32)
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.1)
+    _, labels, _ = cv2.kmeans(points, k, None, criteria, 3, cv2.KMEANS_PP_CENTERS)
+    parts = np.zeros(blob.shape, np.int32)
+    parts[ys, xs] = labels.ravel() + 1
+    return parts
+
+
 def _split_into_copies(blob: np.ndarray, k: int, expected: float) -> np.ndarray:
-    """The blob cut into k copies, or fewer where a cut leaves a piece below a third of a copy (the
-    area overestimates k where copies show more of their colours than the median copy)."""
+    """The blob cut into k copies (at the necks, else by position), or fewer where a cut leaves a
+    piece below a third of a copy (the area overestimates k where copies show more of their
+    colours than the median copy)."""
     for count in range(k, 1, -1):
-        parts = _split(blob, count)
-        sizes = np.bincount(parts.ravel())[1:]
-        if parts.max() == count and sizes.min() >= 0.35 * expected:
-            return parts
+        for split in (_split, _split_by_position):  # at the necks, else straight across
+            parts = split(blob, count)
+            sizes = np.bincount(parts.ravel())[1:]
+            if parts.max() == count and sizes.min() >= 0.35 * expected:
+                return parts
     return blob.astype(np.int32)
 
 
@@ -220,8 +234,8 @@ def _split(blob: np.ndarray, k: int) -> np.ndarray:
         markers, count = ndimage.label(dist > level * dist.max())
         if count >= k:
             break
-    if count < k:
-        return blob.astype(np.int32)  # one plateau at every level: no neck, nothing to cut
+    if count < k:  # no neck at any level (boxes face to face make one convex blob): k-means
+        return _split_by_position(blob, k)
     depth = ndimage.maximum(dist, markers, np.arange(1, count + 1))
     keep = np.zeros(count + 1, np.int32)
     keep[np.argsort(depth)[::-1][:k] + 1] = np.arange(1, k + 1)
