@@ -355,12 +355,17 @@ def _refit_bounds(grid: HullGrid, bounds):
 # ---------------------------------------------------------------------------- bounds
 
 
-def bounds_from_points(points3d, percentiles=(1.0, 99.0), margin: float = 0.25):
-    """Robust bounds of COLMAP's sparse points (object frame): the per-axis percentiles, widened
-    by ``margin`` x their extent on every side (the points lie on textured surface only, and the
-    percentiles cut the object's extremes with the outliers)."""
+def bounds_from_points(points3d, percentiles=(1.0, 99.0), margin: float = 0.25, reach: float = 4.0):
+    """Robust bounds of COLMAP's sparse points (object frame). Points farther from the median
+    point than ``reach`` x the median such distance are outliers (the ends of a stick are 2x,
+    stray triangulations far more); of the rest, the per-axis percentiles, widened by ``margin``
+    x their extent on every side (the points lie on textured surface only, and the percentiles
+    cut the object's extremes with the last outliers)."""
     points = np.asarray(points3d, np.float64).reshape(-1, 3)
     points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) >= 4:
+        distance = np.linalg.norm(points - np.median(points, axis=0), axis=1)
+        points = points[distance <= reach * np.median(distance)]
     if len(points) < 4:
         raise ValueError(f"bounds_from_points: need at least 4 finite points, got {len(points)}")
     lo, hi = np.percentile(points, percentiles, axis=0)
