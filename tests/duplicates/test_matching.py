@@ -19,6 +19,7 @@ from invrender.duplicates.matching import (
     rotate_image,
     rotate_points,
     smooth_counts,
+    snap_to_upright,
 )
 from invrender.scene.images import srgb_to_linear
 from invrender.scene.types import SceneError
@@ -405,3 +406,13 @@ def test_coarse_to_fine_search_finds_what_the_full_search_finds(features):
     fast = match_pair(a, b, "xfeat", coarse_deg=60.0)
     assert fast.angle_deg == full.angle_deg and len(fast.xy_a) == len(full.xy_a)
     assert np.count_nonzero(fast.counts) <= 7 < np.count_nonzero(full.counts)
+
+
+def test_snapping_moves_matches_onto_the_upright_keypoints_only_when_near(features):
+    b = features["xfeat"][110]
+    own = b.keypoints[b.at(0)]
+    xy = np.vstack([own[:5] + [0.8, -0.6], own[5:10] + [4.0, 0.0]])
+    snapped = snap_to_upright(xy, b, radius_px=1.5)
+    np.testing.assert_array_equal(snapped[:5], own[:5])
+    nearest = np.min(np.linalg.norm(own[None] - xy[5:, None], axis=2), axis=1)
+    np.testing.assert_array_equal(snapped[5:][nearest > 1.5], xy[5:][nearest > 1.5])

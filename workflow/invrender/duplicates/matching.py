@@ -375,6 +375,23 @@ def _glue_search(a: CropFeatures, b: CropFeatures, ks: list[int], batch: bool, s
     return dict(zip(fine, _glue_pairs(a, b, fine, batch)))
 
 
+def snap_to_upright(xy_b: np.ndarray, b: CropFeatures, radius_px: float = 1.5) -> np.ndarray:
+    """b's matched points (found on a turned copy of b, turned back) moved onto b's own upright
+    keypoints where one lies within ``radius_px``: then the pairs (a, b) and (b, c) name the same
+    keypoint of b, and COLMAP can chain them into one track (a point seen by three copies), which
+    registering a third copy needs."""
+    own = b.keypoints[b.at(0)]
+    if len(xy_b) == 0 or len(own) == 0:
+        return xy_b
+    from scipy.spatial import cKDTree
+
+    distance, nearest = cKDTree(own).query(xy_b)
+    out = np.array(xy_b, np.float64, copy=True)
+    near = distance <= radius_px
+    out[near] = own[nearest[near]]
+    return out
+
+
 def fundamental_inliers(xy_a: np.ndarray, xy_b: np.ndarray, threshold_px: float = 2.0) -> np.ndarray:
     """Matches consistent with one fundamental matrix (RANSAC): two copies of a rigid object seen
     by one camera are two views of it. Crop pixels are a similarity of the full image's, so the

@@ -142,7 +142,8 @@ def match_all(crops: dict[int, Crop], features: dict, settings: Settings, progre
     todo = list(itertools.combinations(sorted(crops), 2))
     for a, b in tqdm(todo, desc="match", unit="pair", disable=not progress):
         m = matching.match_pair(features[a], features[b], settings.matcher, rotation_search=settings.rotation_search)
-        pairs[a, b] = (crops[a].to_full(m.xy_a), crops[b].to_full(m.xy_b))
+        xy_b = matching.snap_to_upright(m.xy_b, features[b])
+        pairs[a, b] = (crops[a].to_full(m.xy_a), crops[b].to_full(xy_b))
         report.append({"pair": [a, b], "angle_deg": float(m.angle_deg), "matches": int(len(m.xy_a))})
     return pairs, report
 
