@@ -70,7 +70,7 @@ class Settings:
     hull_resolution: int = 96
     hull_faces: int = 4000
     object_size: float | None = None
-    max_error_px: float = 4.0
+    max_error_px: float = 2.0
     seed: int = 0
 
 
@@ -206,7 +206,9 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
             "duplicates", "matches", f"matches between some of the {len(crops)} crops; found none in any pair"
         )
     height, width = ids.shape
-    registration = mapping.register(workdir, K, width, height, sorted(crops), pairs, seed=settings.seed)
+    registration = mapping.register(
+        workdir, K, width, height, sorted(crops), pairs, seed=settings.seed, max_error_px=settings.max_error_px
+    )
     timings = {"match_and_map_s": time.perf_counter() - started}
     if len(registration.poses) < 2:
         raise SceneError(
