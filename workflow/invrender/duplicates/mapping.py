@@ -153,8 +153,8 @@ def _mapper_options(seed: int, min_model_size: int) -> pycolmap.IncrementalPipel
     options.ba_refine_focal_length = False
     options.ba_refine_principal_point = False
     options.ba_refine_extra_params = False
-    options.mapper.init_min_num_inliers = 30
-    options.mapper.abs_pose_min_num_inliers = 15
+    options.mapper.init_min_num_inliers = 15
+    options.mapper.abs_pose_min_num_inliers = 8
     options.mapper.init_min_tri_angle = 4.0
     return options
 

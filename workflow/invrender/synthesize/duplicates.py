@@ -75,6 +75,7 @@ DUPLICATES_DEFAULTS = {
         "attempts": 2000,  # draws of a pose, for all copies together
         "orientations": ["random"],  # copy i lies as entry i mod len: upright, upside_down, lying, random
         "touching": 0,  # the last this many copies each touch an earlier copy
+        "max_yaw_deg": 180.0,  # resting copies turn about the floor normal within +- this
     },
     "camera": {"width": 96, "height": 72, "fov_deg": 60.0, "distance": 0.8, "elevation_deg": 55.0, "azimuth_deg": 0.0},
     "ks": 0.04,
@@ -370,13 +371,16 @@ def _rest_rotation(kind: str, orientation: str, rng: np.random.Generator) -> np.
     return _rotation(2, np.pi / 2) @ _rotation(1, rng.uniform(0, 2 * np.pi))
 
 
-def _draw_rotation(kind: str, orientation: str, rng: np.random.Generator) -> np.ndarray:
+def _draw_rotation(kind: str, orientation: str, rng: np.random.Generator, max_yaw_deg: float = 180.0) -> np.ndarray:
     """A copy's rotation: uniform on SO(3) ("random"), else its rest rotation turned about the
-    floor normal by a uniform yaw (a turn in the image plane under a camera looking down)."""
+    floor normal by a uniform yaw (a turn in the image plane under a camera looking down), within
+    +-max_yaw_deg (180: any; a smaller range makes copies that show the same faces)."""
     if orientation == "random":
         return _random_rotation(rng)
     rest = _rest_rotation(kind, orientation, rng)
-    return _rotation(1, rng.uniform(0, 2 * np.pi)) @ rest
+    if max_yaw_deg >= 180.0:
+        return _rotation(1, rng.uniform(0, 2 * np.pi)) @ rest
+    return _rotation(1, np.radians(rng.uniform(-max_yaw_deg, max_yaw_deg))) @ rest
 
 
 def _unique_directions(vectors: np.ndarray) -> np.ndarray:
@@ -480,7 +484,7 @@ def _place(obj_positions, shape: ConvexShape, camera, cfg, rng):
         i = len(poses)
         toucher = i >= count - touching
         partner = int(rng.integers(i)) if toucher else None
-        R = _draw_rotation(kind, orientations[i % len(orientations)], rng)
+        R = _draw_rotation(kind, orientations[i % len(orientations)], rng, float(p.get("max_yaw_deg", 180.0)))
         rotated = obj_positions @ R.T
         if toucher:
             angle = rng.uniform(0, 2 * np.pi)
