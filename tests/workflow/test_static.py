@@ -290,7 +290,7 @@ def test_nested_config_overrides_on_the_command_line(tmp_path):
 
 def _resources_by_rule(output: str) -> dict[str, str]:
     rules = {}
-    for rule, resources in re.findall(r"(?m)^rule (\w+):\n(?:    .*\n)*?    resources: (.*)", output):
+    for rule, resources in re.findall(r"(?m)^(?:rule|checkpoint) (\w+):\n(?:    .*\n)*?    resources: (.*)", output):
         rules[rule] = resources
     return rules
 
