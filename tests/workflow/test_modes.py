@@ -27,10 +27,17 @@ def dry_run(tmp_path, scenes, *targets, check=True):
     return snakemake(tmp_path, "-n", *targets, config=config, check=check)
 
 
+# What a duplicates capture with cameras (a model, or a photograph's lens) builds: its one camera,
+# the segment checkpoint, the poses and shared mesh, the mesh unwrapped, the scene baked, and what
+# reads the scene. (duplicates_crop joins once the checkpoint has run.)
+DUPLICATES_CHAIN = ("cameras", "segment", "duplicates", "geometry", "bake_duplicates", "features", "render", "export")
+
+
 def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     """One photograph (with masks, or with depth and a segmentation, or nothing else) is a valid
-    duplicates or room capture; without cameras nothing can run yet, and the workflow says
-    what each will get once its stages land."""
+    duplicates or room capture. A duplicates photograph with a field of view or a focal length
+    gets its camera from the cameras rule and goes the whole way; without either nothing can
+    run, and the workflow says what each will get once its stages land."""
     lay_out(
         tmp_path,
         [
@@ -51,7 +58,11 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     )
     scenes = {
         "shelf": {"mode": "duplicates", "capture": {"path": "shelf", "masks": "masks.png", "field_of_view": 60}},
-        "boxes": {"mode": "duplicates", "capture": {"path": "boxes", "masks": "masks", "focal_length": 900}},
+        "boxes": {
+            "mode": "duplicates",
+            "capture": {"path": "boxes", "masks": "masks", "focal_length": 900},
+            "segment": {"backend": "provided"},
+        },
         "tins": {"mode": "duplicates", "capture": {"path": "tins", "image": "images/two.jpg"}},
         "living": {
             "mode": "room",
@@ -64,33 +75,36 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
         },
         "bare": {"mode": "room", "capture": {"path": "bare"}},
     }
-    result = dry_run(tmp_path, scenes)
-    assert job_counts(result.stdout) == {"all": 1}
-    assert "scene 'shelf' (duplicates, a capture of your own): builds nothing yet" in result.stdout
-    assert "segment, duplicates and the shared mesh (issue 13)" in result.stdout
-    assert "scene 'living' (room, a capture of your own): builds nothing yet" in result.stdout
+    result = dry_run(tmp_path, scenes, "-p")
+    # shelf and boxes: the whole chain; living: its camera (the room stages wait for issue 16)
+    assert job_counts(result.stdout) == {**dict.fromkeys(DUPLICATES_CHAIN, 2), "cameras": 3, "all": 1}
+    assert "cameras shelf/images/IMG_0001.jpg --out results/shelf/cameras --field-of-view 60" in result.stdout
+    assert "cameras boxes/images/a.exr --out results/boxes/cameras --focal-length 900" in result.stdout
+    assert "segment shelf/images/IMG_0001.jpg --out results/shelf/segmentation --backend opencv" in result.stdout
+    assert "--backend provided --min-instances 3 --masks boxes/masks" in result.stdout
+    assert "scene 'shelf' (duplicates, a capture of your own): builds results/shelf/cameras, " in result.stdout
+    assert "scene 'tins' (duplicates, a capture of your own): builds nothing yet" in result.stdout
+    assert "the material and light stage (issue 14)" in result.stdout
+    assert "scene 'living' (room, a capture of your own): builds results/living/cameras;" in result.stdout
     assert "(issue 16) build results/living/scene/" in result.stdout
     assert not (tmp_path / "results").exists()
 
 
-def test_a_photograph_with_cameras_gets_the_cameras_rule_and_no_more(tmp_path):
+def test_a_photograph_with_cameras_is_recovered_without_truth(tmp_path):
+    """A duplicates photograph with a COLMAP model goes the whole way; with no truth there is
+    nothing to evaluate, and asking for it says why."""
     lay_out(tmp_path, ["shelf/images/IMG_0001.jpg", *(f"shelf/{name}" for name in COLMAP)])
     scenes = {"shelf": {"mode": "duplicates", "capture": {"path": "shelf"}}}
-    assert job_counts(dry_run(tmp_path, scenes).stdout) == {"cameras": 1, "all": 1}
-    # What needs a mesh or a scene directory says which stage will bring it.
-    for target, expected in [
-        ("results/shelf/geometry", "without a mesh"),
-        ("results/shelf/renders", "nothing writes results/shelf/scene/ yet"),
-    ]:
-        result = dry_run(tmp_path, scenes, target, check=False)
-        assert result.returncode != 0
-        assert "scene 'shelf' is a duplicates capture" in result.stdout and expected in result.stdout
-        assert "(issue 13)" in result.stdout
+    assert job_counts(dry_run(tmp_path, scenes).stdout) == {**dict.fromkeys(DUPLICATES_CHAIN, 1), "all": 1}
+    for rule in ("gradients", "milo_train", "bake", "evaluate", "evaluate_duplicates"):
+        assert f"rule {rule}:" not in dry_run(tmp_path, scenes).stdout
+    result = dry_run(tmp_path, scenes, "results/shelf/report", check=False)
+    assert result.returncode != 0 and "results/shelf/report" in result.stdout
 
 
 def test_a_multiview_capture_is_recovered_end_to_end(tmp_path):
     """The default mode of a capture; an OBJ mesh does as well as mesh.ply. With no truth there
-    is no evaluate and no truth_scene: the scene directory comes from milo_train and bake."""
+    is no evaluate: the scene directory comes from milo_train and bake."""
     lay_out(tmp_path, ["kitchen/images/v0.png", "kitchen/mesh.obj", *(f"kitchen/{name}" for name in COLMAP)])
     result = dry_run(tmp_path, {"kitchen": {"capture": {"path": "kitchen"}}}, "-p")
     stages = ("cameras", "geometry", "gradients", "milo_train", "bake", "features", "render", "export", "all")

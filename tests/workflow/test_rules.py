@@ -15,10 +15,11 @@ import shutil
 import numpy as np
 import pytest
 import yaml
-from workflow_helpers import colmap_image_names, job_counts, read_image, read_json, snakemake
+from workflow_helpers import colmap_image_names, job_counts, ran_jobs, read_image, read_json, snakemake
 
-VIEWS = {"room": 2, "cans": 1}
-WIDTH, HEIGHT = 32, 24
+VIEWS = {"room": 2, "boxes": 1}
+WIDTH, HEIGHT = 32, 24  # the room's views
+SIZES = {"room": (HEIGHT, WIDTH), "boxes": (240, 320)}  # box-6-ci
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 
 
@@ -56,7 +57,7 @@ def built(tmp_path_factory, test_config):
 
     users = {name: {"capture": {"path": f"captures/{name}"}} for name in ("mine", "binary")}
     config = dict(test_config, scenes=dict(test_config["scenes"], **users))
-    result = snakemake(workdir, "--cores", "2", "results/room/capture", "results/cans/capture")
+    result = snakemake(workdir, "--cores", "2", "results/room/capture", "results/boxes/capture")
     assert job_counts(result.stdout) == {"synthesize": 2}
 
     capture = workdir / "captures" / "mine"
@@ -86,7 +87,7 @@ def test_synthesize_writes_captures(built):
         assert len(exrs) == views
         for exr in exrs:
             image = read_image(exr)
-            assert image.shape == (HEIGHT, WIDTH, 3)
+            assert image.shape == (*SIZES[scene], 3)
             assert np.isfinite(image).all() and (image >= 0).all() and image.mean() > 0
             assert exr.with_suffix(".png").is_file()
             assert (capture / "ground_truth" / "masks" / f"{exr.stem}.png").is_file()
@@ -96,27 +97,74 @@ def test_synthesize_writes_captures(built):
         assert read_json(capture / "ground_truth/scene/scene.json")
         assert (workdir / "results" / scene / "logs/synthesize.log").stat().st_size > 0
         assert (workdir / "results" / scene / "benchmarks/synthesize.tsv").is_file()
-    poses = read_json(workdir / "results/cans/capture/ground_truth/poses.json")
-    assert len(poses["instances"]) == 3
+    poses = read_json(workdir / "results/boxes/capture/ground_truth/poses.json")
+    assert len(poses["instances"]) == 6  # box-6-ci
 
 
-def test_truth_scene_copies_the_ground_truth(built):
-    """A duplicates scene's results/{scene}/scene is its synthetic truth, byte for byte, with the
-    true poses of its copies, until the stages that recover it land."""
+def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
+    """segment (a checkpoint), one duplicates_crop per instance it found, duplicates, geometry on
+    the recovered mesh, bake_duplicates: a v2 scene with one object per placed instance, all on
+    one shared mesh, at the recovered poses. The truth is read by nothing of this."""
+    from invrender.scene.format import load_scene
+    from invrender.scene.poses import read_poses
+
     workdir, _ = built
-    result = snakemake(workdir, "--cores", "2", "results/cans/scene")
-    assert job_counts(result.stdout) == {"truth_scene": 1}
-    truth = workdir / "results" / "cans" / "capture" / "ground_truth"
-    copy = workdir / "results" / "cans" / "scene"
-    files = sorted(p.relative_to(truth / "scene") for p in (truth / "scene").rglob("*") if p.is_file())
-    assert "scene.json" in {str(f) for f in files} and len(files) > 3
-    for name in files:
-        assert (copy / name).read_bytes() == (truth / "scene" / name).read_bytes(), name
-    extra = {str(p.relative_to(copy)) for p in copy.rglob("*") if p.is_file()} - {str(f) for f in files}
-    extra.discard(".snakemake_timestamp")  # Snakemake's mark in every directory it outputs
-    assert extra == {"poses.json"}
-    assert (workdir / "results/cans/logs/truth_scene.log").read_text().count("->") >= len(files)
-    assert read_json(copy / "poses.json") == read_json(truth / "poses.json")
+    result = snakemake(workdir, "--cores", "2", "results/boxes/scene")
+    instances = read_json(workdir / "results/boxes/segmentation/instances.json")["instances"]
+    assert len(instances) >= 3
+    assert ran_jobs(result.stdout) == {
+        **dict.fromkeys(("cameras", "segment", "duplicates", "geometry", "bake_duplicates"), 1),
+        "duplicates_crop": len(instances),
+    }
+    assert "ground_truth" not in result.stdout  # no job of the recovery reads the truth
+    crops = workdir / "results/boxes/crops"
+    for entry in instances:
+        assert (crops / f"instance_{entry['id']:03d}.npz").is_file()
+        assert (crops / f"instance_{entry['id']:03d}.features.npz").is_file()
+    duplicates = workdir / "results/boxes/duplicates"
+    for name in ("poses.json", "poses_colmap.json", "object.ply", "duplicates.json", "overlay.png", "sparse"):
+        assert (duplicates / name).exists(), name
+    poses = read_poses(duplicates / "poses.json")
+    summary = read_json(duplicates / "duplicates.json")
+    placed = summary["placed"]
+    assert len(placed) >= 3 and set(placed) <= {entry["id"] for entry in instances}
+    assert summary["settings"]["step_deg"] == 30 and summary["settings"]["crop_size"] == 128  # the config's
+    colmap_names = colmap_image_names(duplicates / "sparse")
+    assert len(colmap_names) == len(summary["registered_by_colmap"]) >= 2
+    assert read_json(workdir / "results/boxes/geometry/geometry.json")["mesh"]["faces"] > 0
+    scene = load_scene(workdir / "results/boxes/scene")
+    assert scene.version == 2 and len(scene.objects) == len(placed)
+    assert len({id(obj.mesh) for obj in scene.objects}) == 1  # instances of one shared mesh
+    for obj, pose in zip(sorted(scene.objects, key=lambda o: o.instance_id), poses_of(poses, placed)):
+        np.testing.assert_allclose(obj.transform, pose, atol=1e-5)
+
+
+def poses_of(poses, ids):
+    """The 4 x 4 T_obj2world of each id, in the order of ``ids``."""
+    by_id = {entry["instance_id"]: entry["T_obj2world"] for entry in poses["instances"]}
+    return [np.asarray(by_id[i]) for i in sorted(ids)]
+
+
+def test_evaluate_duplicates_scores_the_recovery(built):
+    """The report of a synthetic duplicates scene: metrics.json with the keys docs/evaluate.md
+    lists, the segmentation scored against the true masks, and the outline figure."""
+    workdir, _ = built
+    snakemake(workdir, "--cores", "2", "results/boxes/duplicates")  # upstream, if not built here yet
+    result = snakemake(workdir, "--cores", "2", "results/boxes/report")
+    assert ran_jobs(result.stdout) == {"evaluate_duplicates": 1}
+    report = workdir / "results/boxes/report"
+    metrics = read_json(report / "metrics.json")
+    assert metrics["mode"] == "duplicates"
+    assert {"version", "inputs", "paper", "counts", "object", "masks", "poses", "mesh"} <= set(metrics)
+    assert metrics["counts"]["truth"] == 6
+    segmented = len(read_json(workdir / "results/boxes/segmentation/instances.json")["instances"])
+    assert metrics["counts"]["segmented"] == segmented
+    assert 0.5 <= metrics["masks"]["mean_iou_matched"] <= 1
+    assert metrics["masks"]["matched"] >= 3
+    after = metrics["poses"]["after"]
+    assert after["registered"] >= 3 and after["rotation"]["error_deg"]["median"] >= 0
+    assert metrics["mesh"] is None or metrics["mesh"]["chamfer_m"] > 0
+    assert list(report.glob("outlines_*.png"))
 
 
 def test_a_multiview_scene_is_recovered_not_copied(built):
@@ -132,7 +180,7 @@ def test_a_multiview_scene_is_recovered_not_copied(built):
     workdir = original.parent / "recovered"  # a copy: the other tests count the jobs they run
     shutil.copytree(original, workdir, symlinks=True)
     result = snakemake(workdir, "--cores", "2", "results/room/scene")
-    assert "truth_scene" not in job_counts(result.stdout)
+    assert "bake_duplicates" not in job_counts(result.stdout)
     assert {"milo_train", "bake"} <= set(job_counts(result.stdout))
     scene = load_scene(workdir / "results/room/scene")
     with np.load(workdir / "results/room/milo/maps.npz") as maps:
@@ -261,13 +309,12 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
     from invrender.export import validate_usd
 
     workdir, _ = built
-    snakemake(workdir, "--cores", "2", "results/room/scene", "results/cans/scene")  # upstream, if not built here yet
+    snakemake(workdir, "--cores", "2", "results/room/scene", "results/boxes/scene")  # upstream, if not built here yet
     result = snakemake(
-        workdir, "--cores", "2", "-p", "results/room/export", "results/cans/export", "--config", "export={usdc: true}"
+        workdir, "--cores", "2", "-p", "results/room/export", "results/boxes/export", "--config", "export={usdc: true}"
     )
     assert job_counts(result.stdout) == {"export": 2}
-    assert "--poses results/cans/scene/poses.json" in result.stdout
-    for scene in ("room", "cans"):
+    for scene in ("room", "boxes"):
         export = workdir / "results" / scene / "export"
         for layer in ("scene.usda", "scene.usdc"):
             assert validate_usd(export / layer) == [], (scene, layer)
@@ -288,9 +335,10 @@ def test_export_writes_valid_usd_with_instanced_duplicates(built, test_config):
 
     _, regions = emitter_regions(load_scene(workdir / "results/room/scene"))
     assert len([p for p in room.Traverse() if p.HasAPI(UsdLux.MeshLightAPI)]) == regions > 0
-    cans = Usd.Stage.Open(str(workdir / "results/cans/export/scene.usda"))
-    count = test_config["scenes"]["cans"]["synthetic"]["config"]["count"]
-    assert len([p for p in cans.Traverse() if p.IsInstance()]) == count and len(cans.GetPrototypes()) == 1
+    # the boxes: one instance of the one recovered mesh per placed copy
+    boxes = Usd.Stage.Open(str(workdir / "results/boxes/export/scene.usda"))
+    placed = read_json(workdir / "results/boxes/duplicates/duplicates.json")["placed"]
+    assert len([p for p in boxes.Traverse() if p.IsInstance()]) == len(placed) and len(boxes.GetPrototypes()) == 1
 
 
 def test_user_capture_is_recovered_without_truth(built):
@@ -299,6 +347,6 @@ def test_user_capture_is_recovered_without_truth(built):
     workdir, config = built
     result = snakemake(workdir, "-n", "results/mine/renders", "results/mine/export", config=config)
     assert {"milo_train", "bake", "render", "export"} <= set(job_counts(result.stdout))
-    assert "truth_scene" not in job_counts(result.stdout)
+    assert "bake_duplicates" not in job_counts(result.stdout)
     result = snakemake(workdir, "-n", "results/mine/report", config=config, check=False)
     assert result.returncode != 0 and "results/mine/report" in result.stdout

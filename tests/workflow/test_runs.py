@@ -13,7 +13,17 @@ from pathlib import Path
 
 import pytest
 import yaml
-from workflow_helpers import FULL_RUN_JOBS, LOCAL_PROFILE, SNAKEFILE, TEST_CONFIG, job_counts, snakemake, snakemake_env
+from workflow_helpers import (
+    FULL_RUN_JOBS,
+    LOCAL_PROFILE,
+    SNAKEFILE,
+    TEST_CONFIG,
+    job_counts,
+    ran_jobs,
+    read_json,
+    snakemake,
+    snakemake_env,
+)
 
 _SHARED = {
     "capture": "synthesize",
@@ -24,8 +34,8 @@ _SHARED = {
     "renders": "render",
     "export": "export",
 }
-# Each scene's outputs and the rule that writes each: the room (multiview) is recovered, the
-# cans' scene is truth_scene's copy of the truth.
+# Each scene's outputs and the rule that writes each: the room (multiview) is recovered by MILO,
+# the boxes (duplicates) from their one photograph.
 RULE_OF_OUTPUT = {
     "room": {
         **_SHARED,
@@ -34,7 +44,13 @@ RULE_OF_OUTPUT = {
         "report": "evaluate",
         "edits": "edit",
     },
-    "cans": {**_SHARED, "scene": "truth_scene"},
+    "boxes": {
+        **{k: v for k, v in _SHARED.items() if k != "gradients"},
+        "segmentation": "segment",
+        "duplicates": "duplicates",
+        "scene": "bake_duplicates",
+        "report": "evaluate_duplicates",
+    },
 }
 
 
@@ -43,7 +59,10 @@ def complete(tmp_path_factory):
     """A working directory where the whole toy workflow has run."""
     workdir = tmp_path_factory.mktemp("complete")
     result = snakemake(workdir, "--workflow-profile", LOCAL_PROFILE)
-    assert job_counts(result.stdout) == FULL_RUN_JOBS
+    assert job_counts(result.stdout) == FULL_RUN_JOBS  # the plan before the checkpoint
+    instances = read_json(workdir / "results/boxes/segmentation/instances.json")["instances"]
+    assert len(instances) >= 3
+    assert ran_jobs(result.stdout) == FULL_RUN_JOBS | {"duplicates_crop": len(instances)}
     return workdir
 
 
@@ -57,8 +76,9 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
     override = tmp_path / "faces.yaml"
     override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    # Downstream of geometry: gradients, and the room's recovery and all that reads it; the cans'
-    # scene is truth_scene's copy: nothing upstream runs again.
+    # Downstream of geometry: the room's gradients, recovery and all that reads them, and the
+    # boxes' scene baked on the new mesh and what reads it; segment and duplicates (upstream of
+    # geometry) do not run again, nor does evaluate_duplicates (it scores duplicates/).
     assert job_counts(result.stdout) == RERUN_AFTER_GEOMETRY
     assert "Params have changed since last execution" in result.stdout
     # The same through --config, as one would type it.
@@ -68,8 +88,8 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
-    "gradients": 2,
-    **dict.fromkeys(("milo_train", "bake", "features", "render", "export", "evaluate", "edit"), 1),
+    **dict.fromkeys(("gradients", "milo_train", "bake", "bake_duplicates", "evaluate", "edit"), 1),
+    **dict.fromkeys(("features", "render", "export"), 2),
     "all": 1,
 }
 
@@ -101,6 +121,9 @@ def test_report_shows_the_renders(complete):
     assert "Renders" in html and "Geometry" in html and "Features" in html and "Export" in html
     for view in ("view_000.png", "view_001.png", "features.json", "geometry.json", "export.json"):
         assert view in html
+    # the duplicates scene's figures: the segmentation, the recovered poses, the outlines
+    assert "Segmentation" in html and "Duplicates" in html
+    assert "overlay.png" in html and "outlines_view_000.png" in html
 
 
 def _mtimes(workdir: Path) -> dict[str, float]:

@@ -17,8 +17,11 @@ from workflow_helpers import FULL_RUN_JOBS, REPO, TEST_CONFIG, job_counts, snake
 DEMO_CONFIG = REPO / "config" / "config.yaml"
 SCHEMA = REPO / "workflow" / "schemas" / "config.schema.yaml"
 SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
-RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "truth_scene"}
-RULES |= {"features", "render", "export", "evaluate", "edit"}
+# The rules of the demo's DAG before the segment checkpoint has run (what --rulegraph and a dry
+# run show); duplicates_crop, one job per instance, joins once it has.
+RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
+RULES |= {"segment", "duplicates", "features", "render", "export", "evaluate", "evaluate_duplicates", "edit"}
+CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit"}
 
 
@@ -55,6 +58,15 @@ def test_python_follows_ruff(command):
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     assert job_counts(result.stdout) == FULL_RUN_JOBS
+
+
+def test_every_rule_is_known():
+    """Each rule the .smk files define is in RULES or CHECKPOINT_RULES (so the tests below see
+    every rule), and nothing is in both."""
+    defined = set()
+    for smk in [REPO / "Snakefile", *(REPO / "workflow" / "rules").glob("*.smk")]:
+        defined |= set(re.findall(r"(?m)^(?:rule|checkpoint) (\w+):", smk.read_text()))
+    assert defined == {"all"} | RULES | CHECKPOINT_RULES and not RULES & CHECKPOINT_RULES
 
 
 def test_rulegraph_picture_is_current(tmp_path):
@@ -278,7 +290,7 @@ def test_nested_config_overrides_on_the_command_line(tmp_path):
 
 def _resources_by_rule(output: str) -> dict[str, str]:
     rules = {}
-    for rule, resources in re.findall(r"(?m)^rule (\w+):\n(?:    .*\n)*?    resources: (.*)", output):
+    for rule, resources in re.findall(r"(?m)^(?:rule|checkpoint) (\w+):\n(?:    .*\n)*?    resources: (.*)", output):
         rules[rule] = resources
     return rules
 

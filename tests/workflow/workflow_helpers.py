@@ -81,20 +81,35 @@ def colmap_image_names(model_dir) -> list[str]:
     return sorted(image.name for image in reconstruction.images.values())
 
 
-# The jobs of a complete run of the test config (and of the demo): the room (multiview) is
-# recovered, evaluated and edited; the cans keep truth_scene's copy of their truth.
+def ran_jobs(output: str) -> dict[str, int]:
+    """The jobs a run (or dry run) announced, as {rule: count}: unlike the 'Job stats' table,
+    printed before the segment checkpoint has run, this counts the per-instance jobs
+    (duplicates_crop) the checkpoint added."""
+    counts: dict[str, int] = {}
+    for rule in re.findall(r"(?m)^(?:local)?(?:rule|checkpoint) (\w+):$", output):
+        counts[rule] = counts.get(rule, 0) + 1
+    return counts
+
+
+# The jobs of a complete run of the test config (and of the demo) as planned before the segment
+# checkpoint has run: the room (multiview) is recovered, evaluated and edited; the duplicates
+# scene is segmented, solved, baked and evaluated. Once the checkpoint has run, one
+# duplicates_crop job per instance it found joins them (ran_jobs counts those).
 FULL_RUN_JOBS = {
     "synthesize": 2,
     "cameras": 2,
     "geometry": 2,
-    "gradients": 2,
+    "segment": 1,
+    "duplicates": 1,
+    "gradients": 1,
     "milo_train": 1,
     "bake": 1,
-    "truth_scene": 1,
+    "bake_duplicates": 1,
     "features": 2,
     "render": 2,
     "export": 2,
     "evaluate": 1,
+    "evaluate_duplicates": 1,
     "edit": 1,
     "all": 1,
 }

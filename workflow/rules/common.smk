@@ -513,7 +513,9 @@ def lens(scene):
     """A photograph's field_of_view or focal_length key, if its capture gives one instead of
     cameras (the cameras rule then makes its one camera)."""
     capture = SCENES[scene].get("capture", {})
-    return next((key for key in ("field_of_view", "focal_length") if key in capture), None)
+    return next(
+        (key for key in ("field_of_view", "focal_length") if key in capture), None
+    )
 
 
 def has_cameras(scene):
@@ -671,6 +673,45 @@ def capture_cameras_input(wildcards):
     if is_synthetic(wildcards.scene):
         return capture_dir(wildcards)
     return capture_cameras(wildcards)
+
+
+# ---------------------------------------------------------------------------- duplicates
+# (the input functions of workflow/rules/duplicates.smk)
+
+
+def segmentation_dir(wildcards):
+    """The segment checkpoint's folder (asking for it makes snakemake re-plan once it exists)."""
+    return checkpoints.segment.get(scene=wildcards.scene).output[0]
+
+
+def photograph_stem(scene):
+    """The stem of the photograph (its mask is masks/<stem>.png)."""
+    if is_synthetic(scene):
+        return "view_000"
+    return photograph(scene).stem
+
+
+def instance_masks(wildcards):
+    return f"results/{wildcards.scene}/segmentation/masks/{photograph_stem(wildcards.scene)}.png"
+
+
+def instance_files(suffix):
+    """The per-instance files of duplicates_crop (results/{scene}/crops/: a sibling of the solve
+    step's folder, which may not contain another rule's outputs)."""
+
+    def function(wildcards):
+        return [
+            f"results/{wildcards.scene}/crops/instance_{i:03d}{suffix}"
+            for i in segmented_instances(wildcards)
+        ]
+
+    return function
+
+
+def duplicates_settings(wildcards):
+    """`--set key=value` for each setting: config `duplicates`, then the scene's own."""
+    scene = SCENES[wildcards.scene]
+    return set_options({**config["duplicates"], **scene.get("duplicates", {})})
 
 
 # ---------------------------------------------------------------------------- params

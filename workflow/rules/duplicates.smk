@@ -3,41 +3,6 @@
 # virtual cameras, the visual hull and render-and-compare refinement in one job.
 
 
-def segmentation_dir(wildcards):
-    """The segment checkpoint's folder (asking for it makes snakemake re-plan once it exists)."""
-    return checkpoints.segment.get(scene=wildcards.scene).output[0]
-
-
-def photograph_stem(scene):
-    """The stem of the photograph (its mask is masks/<stem>.png)."""
-    if is_synthetic(scene):
-        return "view_000"
-    return photograph(scene).stem
-
-
-def instance_masks(wildcards):
-    return f"results/{wildcards.scene}/segmentation/masks/{photograph_stem(wildcards.scene)}.png"
-
-
-def instance_files(suffix):
-    """The per-instance files of duplicates_crop (results/{scene}/crops/: a sibling of the solve
-    step's folder, which may not contain another rule's outputs)."""
-
-    def function(wildcards):
-        return [
-            f"results/{wildcards.scene}/crops/instance_{i:03d}{suffix}"
-            for i in segmented_instances(wildcards)
-        ]
-
-    return function
-
-
-def duplicates_settings(wildcards):
-    """`--set key=value` for each setting: config `duplicates`, then the scene's own."""
-    scene = SCENES[wildcards.scene]
-    return set_options({**config["duplicates"], **scene.get("duplicates", {})})
-
-
 rule duplicates_crop:
     """One instance's crop (fixed size, exact map back to the photograph's pixels) and its
     features at every rotation angle of the search."""
@@ -53,10 +18,10 @@ rule duplicates_crop:
         "results/{scene}/benchmarks/duplicates_crop/{instance}.tsv"
     wildcard_constraints:
         instance=r"\d+",
-    conda:
-        "../../envs/workflow.yaml"
     group:
         "duplicates_crops"
+    conda:
+        "../../envs/workflow.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -74,7 +39,8 @@ rule duplicates_crop:
 rule duplicates:
     """All pairs of crops matched with the rotation search, COLMAP's virtual cameras turned into
     object poses, the shared mesh carved as a visual hull and the poses refined by
-    render-and-compare: sparse/, poses.json, object.ply, duplicates.json, overlay.png."""
+    render-and-compare: sparse/, poses.json, object.ply, duplicates.json, overlay.png.
+    """
     input:
         segmentation=segmentation_dir,
         cameras="results/{scene}/cameras",

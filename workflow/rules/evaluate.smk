@@ -45,7 +45,8 @@ rule evaluate:
 rule evaluate_duplicates:
     """A recovered duplicates scene against the synthetic truth: mask IoU, instances registered,
     rotation error (a can's twist about its axis apart) and translation error after a similarity
-    alignment, before and after render-and-compare, and the shared mesh's Chamfer distance."""
+    alignment, before and after render-and-compare, and the shared mesh's Chamfer distance.
+    """
     input:
         segmentation=segmentation_dir,
         duplicates="results/{scene}/duplicates",
