@@ -19,7 +19,7 @@ from workflow_helpers import colmap_image_names, job_counts, ran_jobs, read_imag
 
 VIEWS = {"room": 2, "boxes": 1}
 WIDTH, HEIGHT = 32, 24  # the room's views
-SIZES = {"room": (HEIGHT, WIDTH), "boxes": (240, 320)}  # box-6-ci
+SIZES = {"room": (HEIGHT, WIDTH), "boxes": (360, 480)}  # tests/workflow/config.yaml
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 
 
@@ -98,7 +98,7 @@ def test_synthesize_writes_captures(built):
         assert (workdir / "results" / scene / "logs/synthesize.log").stat().st_size > 0
         assert (workdir / "results" / scene / "benchmarks/synthesize.tsv").is_file()
     poses = read_json(workdir / "results/boxes/capture/ground_truth/poses.json")
-    assert len(poses["instances"]) == 6  # box-6-ci
+    assert len(poses["instances"]) == 5
 
 
 def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
@@ -128,7 +128,7 @@ def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
     summary = read_json(duplicates / "duplicates.json")
     placed = summary["placed"]
     assert len(placed) >= 3 and set(placed) <= {entry["id"] for entry in instances}
-    assert summary["settings"]["step_deg"] == 30 and summary["settings"]["crop_size"] == 128  # the config's
+    assert summary["settings"]["step_deg"] == 12 and summary["settings"]["crop_size"] == 160  # the config's
     colmap_names = colmap_image_names(duplicates / "sparse")
     assert len(colmap_names) == len(summary["registered_by_colmap"]) >= 2
     assert read_json(workdir / "results/boxes/geometry/geometry.json")["mesh"]["faces"] > 0
@@ -156,7 +156,7 @@ def test_evaluate_duplicates_scores_the_recovery(built):
     metrics = read_json(report / "metrics.json")
     assert metrics["mode"] == "duplicates"
     assert {"version", "inputs", "paper", "counts", "object", "masks", "poses", "mesh"} <= set(metrics)
-    assert metrics["counts"]["truth"] == 6
+    assert metrics["counts"]["truth"] == 5
     segmented = len(read_json(workdir / "results/boxes/segmentation/instances.json")["instances"])
     assert metrics["counts"]["segmented"] == segmented
     assert 0.5 <= metrics["masks"]["mean_iou_matched"] <= 1
