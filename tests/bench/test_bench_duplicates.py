@@ -76,7 +76,11 @@ def test_paper_row_follows_the_number_of_copies():
 def test_markdown_has_every_row_cans_split_and_the_stopped_row(tmp_path):
     rows = [fake_row("box-10-hd", "default"), fake_row("can-10-hd", "default", swing=4.5, twist=30.25)]
     stopped = {"scene": "box-10-hd", "variant": "no-rotation-search", "metrics": None, "duplicates": None}
-    stopped |= {"steps": {}, "error": "duplicates: registration: expected COLMAP to register at least 2"}
+    stopped |= {
+        "steps": {},
+        "segmented": 11,
+        "error": "duplicates: registration: expected COLMAP to register at least 2",
+    }
     rows.append(stopped)
     report = {
         "mode": "full",
@@ -100,6 +104,7 @@ def test_markdown_has_every_row_cans_split_and_the_stopped_row(tmp_path):
     first = [c.strip() for c in cost.splitlines()[4].strip("|").split("|")]
     assert first == ["box-10-hd", "default", "1.5", "2.2", "120.0", "55", "612.5", "700.0", "-", "1234"]
     assert re.search(r"STOPPED: box-10-hd no-rotation-search: duplicates: registration", text)
+    assert "| no-rotation-search | -        | -/11/-/-" in main  # the segmentation's count without an evaluation
 
 
 def test_ledger_resumes_with_the_recorded_time(tmp_path):
@@ -116,6 +121,22 @@ def test_ledger_resumes_with_the_recorded_time(tmp_path):
     assert calls == [tmp_path / "out"] and again == json.loads(json.dumps(first))
     (tmp_path / "other").mkdir()  # made by another run: skipped, untimed
     assert bench.Ledger(tmp_path).run("evaluate", tmp_path / "other", step, tmp_path / "other") is None
+
+
+def test_a_stopped_step_is_kept_and_not_run_again(tmp_path):
+    calls = []
+
+    def register(path):
+        calls.append(path)
+        raise SceneError("duplicates", "registration", "COLMAP to register at least 2; it registered 0")
+
+    with pytest.raises(bench.Stopped, match="it registered 0"):
+        bench.Ledger(tmp_path).run("solve", tmp_path / "out", register, tmp_path / "out")
+    kept = json.loads((tmp_path / "steps.json").read_text())["solve"]
+    assert "it registered 0" in kept["error"] and kept["wall_s"] >= 0
+    with pytest.raises(bench.Stopped, match="it registered 0"):
+        bench.Ledger(tmp_path).run("solve", tmp_path / "out", register, tmp_path / "out")
+    assert len(calls) == 1 and not (tmp_path / "out").exists()
 
 
 def test_scenes_and_variants():

@@ -89,10 +89,14 @@ def settings_from(quick: bool, scenes, variants, work) -> Settings:
 
 
 def measure(fn, *args, **kwargs) -> tuple[object, dict]:
-    """(result, {wall_s, cpu_s, peak_rss_mb, rss_growth_mb}) of one call in this process."""
+    """(result, or the SceneError it stopped with; {wall_s, cpu_s, peak_rss_mb, rss_growth_mb})
+    of one call in this process."""
     wall, cpu = time.perf_counter(), time.process_time()
     with PeakRSS() as memory:
-        out = fn(*args, **kwargs)
+        try:
+            out = fn(*args, **kwargs)
+        except SceneError as stop:
+            out = stop
     return out, {
         "wall_s": time.perf_counter() - wall,
         "cpu_s": time.process_time() - cpu,
@@ -101,9 +105,15 @@ def measure(fn, *args, **kwargs) -> tuple[object, dict]:
     }
 
 
+class Stopped(Exception):
+    """A step stopped with a SceneError, now or in an earlier run (its message in steps.json)."""
+
+
 class Ledger:
     """steps.json in a folder: each step's measurements, written as soon as it ran, so that a
-    resumed run reports the times of the steps it skips."""
+    resumed run reports the times of the steps it skips. A step that stopped with a SceneError
+    is a result too (the ablation that registers nothing): its time and message are kept, and a
+    resumed run reports it again without running it (delete its entry to retry)."""
 
     def __init__(self, folder: Path):
         self.path = Path(folder) / "steps.json"
@@ -113,11 +123,20 @@ class Ledger:
         if Path(output).exists():
             log.info("bench duplicates: %s exists, %s skipped", output, step)
             return self.steps.get(step)
-        _, measured = measure(fn, *args, **kwargs)
+        if (self.steps.get(step) or {}).get("error"):
+            raise Stopped(self.steps[step]["error"])
+        out, measured = measure(fn, *args, **kwargs)
+        if isinstance(out, SceneError):
+            measured["error"] = str(out)
+        self._write(step, measured)
+        if isinstance(out, SceneError):
+            raise Stopped(str(out)) from out
+        return measured
+
+    def _write(self, step: str, measured: dict):
         self.steps[step] = measured
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.path.write_text(json.dumps(self.steps, indent=1) + "\n")
-        return measured
 
 
 def _render(preset: str, out: Path, spp: int):
@@ -139,19 +158,17 @@ def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, st
     return out, measured, f"rendered at {spp} spp"
 
 
-def shared_steps(capture: Path, scene_dir: Path) -> dict:
+def shared_steps(capture: Path, scene_dir: Path, ledger: Ledger):
     """cameras and segment: what every variant of a scene starts from."""
     from ..cameras import stage as cameras
     from ..segment import stage as segment
 
-    ledger = Ledger(scene_dir)
     image = capture / "images" / "view_000.exr"
     ledger.run(
         "cameras", scene_dir / "cameras", cameras.run, capture / "sparse", scene_dir / "cameras",
         images_dir=capture / "images", progress=False,
     )  # fmt: skip
     ledger.run("segment", scene_dir / "segmentation", segment.run, image, scene_dir / "segmentation")
-    return {step: ledger.steps.get(step) for step in ("cameras", "segment")}
 
 
 def _crops(scene_dir: Path, crops: Path, ids: list[int], settings):
@@ -164,14 +181,13 @@ def _crops(scene_dir: Path, crops: Path, ids: list[int], settings):
             stage.run_crop(scene_dir / "cameras", masks, i, crop, features, settings)
 
 
-def variant_steps(capture: Path, scene_dir: Path, variant: str) -> dict:
-    """crop, solve and evaluate of one variant; their measurements."""
+def variant_steps(capture: Path, scene_dir: Path, variant: str, ledger: Ledger):
+    """crop, solve and evaluate of one variant."""
     from ..duplicates import stage
     from ..evaluate import stage as evaluate
 
     settings = stage.settings_from(VARIANTS[variant])
     folder = scene_dir / variant
-    ledger = Ledger(folder)
     seg = scene_dir / "segmentation"
     ids = [int(e["id"]) for e in json.loads((seg / "instances.json").read_text())["instances"]]
     crops = folder / "crops"
@@ -190,31 +206,33 @@ def variant_steps(capture: Path, scene_dir: Path, variant: str) -> dict:
         "evaluate", folder / "report", evaluate.run_duplicates, seg, folder / "duplicates",
         capture / "ground_truth", capture / "images", folder / "report",
     )  # fmt: skip
-    return {step: ledger.steps.get(step) for step in ("crop", "solve", "evaluate")}
 
 
 def run_scene(preset: str, variants: list[str], work: Path, spp: int) -> list[dict]:
     """Every variant of one scene: its rows (metrics, measurements, or the error that stopped it)."""
     capture, render, source = capture_of(preset, work, spp)
     scene_dir = work / preset
-    rows, shared, error = [], {}, None
+    rows, error, shared = [], None, Ledger(scene_dir)
     try:
-        shared = shared_steps(capture, scene_dir)
-    except SceneError as stop:
+        shared_steps(capture, scene_dir, shared)
+    except Stopped as stop:
         error = str(stop)
+    instances = scene_dir / "segmentation" / "instances.json"
+    segmented = len(json.loads(instances.read_text())["instances"]) if instances.exists() else None
     for variant in variants:
         row = {"scene": preset, "variant": variant, "capture": str(capture), "capture_source": source}
-        steps = dict(shared)
+        own = Ledger(scene_dir / variant)
         if error is None:
             try:
-                steps.update(variant_steps(capture, scene_dir, variant))
-            except SceneError as stop:
+                variant_steps(capture, scene_dir, variant, own)
+            except Stopped as stop:
                 row["error"] = str(stop)
                 log.error("bench duplicates: %s %s stopped: %s", preset, variant, stop)
         else:
             row["error"] = error
         row["render"] = render
-        row["steps"] = steps
+        row["segmented"] = segmented
+        row["steps"] = {**shared.steps, **own.steps}
         metrics = scene_dir / variant / "report" / "metrics.json"
         row["metrics"] = json.loads(metrics.read_text()) if metrics.exists() else None
         solved = scene_dir / variant / "duplicates" / "duplicates.json"
@@ -250,7 +268,7 @@ def table_row(row: dict) -> dict:
     out["iou"] = _get(m, "masks", "mean_iou")
     counts = _get(m, "counts") or {}
     out["truth"] = counts.get("truth")
-    out["segmented"] = counts.get("segmented")
+    out["segmented"] = counts.get("segmented", row.get("segmented"))
     registered = _get(row["duplicates"], "registered_by_colmap")
     placed = _get(row["duplicates"], "placed")
     out["registered"] = None if registered is None else len(registered)
