@@ -361,9 +361,9 @@ def write_markdown(out: Path, report: dict) -> str:
         )
     text.append(format_table("Wall time of each step and peak memory", COST_COLUMNS, lines))
     text.append(
-        "Times: wall clock of each stage's Python entry point in this process ('-': the step's output "
-        "was made by another run and reused); peak RSS: this process's resident set while the steps ran "
-        "(psutil, every 2 ms), the largest over the row's steps."
+        "Times: wall clock of each stage's Python entry point in this process ('-': not reached, the row "
+        "stopped before it, or made by another run and reused); peak RSS: this process's resident set "
+        "while the steps ran (psutil, every 2 ms), the largest over the row's steps."
     )
     text.append("")
     errors = [f"{line['scene']} {line['variant']}: {line['error']}" for line in lines if line["error"]]
