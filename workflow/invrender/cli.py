@@ -537,7 +537,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="also train the plain-MLP ablation, template: false (default: yes)",
     )
-    milo.add_argument("--work", help="where the chain's stages write (default results/bench/milo)")
+    milo.add_argument(
+        "--work", help="where the chain's stages write, kept to resume (default results/bench/milo, .../duplicates)"
+    )
+    dup = p.add_argument_group("bench duplicates")
+    dup.add_argument("--scenes", help="comma-separated duplicates presets (default the -hd boxes and cans)")
+    dup.add_argument("--variants", help="comma-separated: default, no-rotation-search, sift (default all on box-10-hd)")
     render = p.add_argument_group("bench render")
     render.add_argument(
         "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"

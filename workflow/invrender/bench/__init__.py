@@ -14,6 +14,8 @@
   triangles, beside a B = 1 render of ours and Mitsuba's (``traversal.py``; docs/benchmarks.md).
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
+- ``duplicates``: Structure from Duplicates on the synthetic fixtures beside the paper's Table 2,
+  with the rotation-search and SIFT ablations (``duplicates.py``; docs/benchmarks.md).
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
@@ -24,8 +26,13 @@ from __future__ import annotations
 
 import importlib
 
-BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal")  # modules here: run(quick, out, device)
-OPTIONS = {"milo": ("config", "iterations", "ablation", "work"), "render": ("sections",)}  # what only some take
+# modules here: run(quick, out, device)
+BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal", "duplicates")
+OPTIONS = {
+    "milo": ("config", "iterations", "ablation", "work"),
+    "render": ("sections",),
+    "duplicates": ("scenes", "variants", "work"),
+}  # what only some take
 
 
 def run_benchmark(what: str, args) -> dict:

@@ -1,0 +1,412 @@
+"""`invrender bench duplicates`: Structure from Duplicates (issue 13) on the synthetic fixtures,
+beside the paper's Table 2 (docs/benchmarks.md, "Structure from Duplicates: poses and shape").
+
+Per scene (a preset of invrender.synthesize.duplicates, docs/duplicates-fixtures.md) and variant
+(the stage's Settings overridden, VARIANTS), the pipeline as the workflow runs it, each step a
+stage's Python entry point timed with its peak memory:
+
+    capture   synthesize duplicates at RENDER_SPP (or an earlier render of the same preset, REUSE)
+    cameras   the capture's COLMAP model -> WORK/SCENE/cameras        (shared by the variants)
+    segment   the opencv backend -> WORK/SCENE/segmentation            (shared by the variants)
+    crop      per instance: crop + features -> WORK/SCENE/VARIANT/crops
+    solve     match, map, carve, refine -> WORK/SCENE/VARIANT/duplicates
+    evaluate  against the truth -> WORK/SCENE/VARIANT/report/metrics.json
+
+A step whose output exists is skipped (resume); its time is then the one recorded when it ran
+(steps.json beside it), or none if another run made it (a folder laid out like /tmp/dev/pipe.sh's,
+copied in). A step that stops with a SceneError ends its row with the message; the others go on.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..scene.types import SceneError
+from .harness import PeakRSS, format_table, quiet_pyopencl, run_report
+
+log = logging.getLogger("invrender.bench")
+
+DEFAULT_WORK = "results/bench/duplicates"
+RENDER_SPP = 64
+REUSE = Path("/tmp/dupgen")  # earlier renders: REUSE/<preset>/ made from REUSE/<preset>.json
+# The order they run in: the acceptance's scenes first (box, 10 and 20 copies), cans beside them.
+SCENES = ("box-10-hd", "can-10-hd", "box-20-hd", "can-20-hd", "box-6-hd")
+QUICK_SCENES = ("box-6-ci", "can-6-ci")  # 15 pairs each: matching, not the renders, costs the time
+VARIANTS = {
+    "default": {},  # xfeat with the rotation search
+    "no-rotation-search": {"rotation_search": False},  # the ablation (section 3.1's rotation search off)
+    "sift": {"matcher": "sift"},
+}
+ABLATION_SCENES = ("box-10-hd",)  # every variant here; the default alone elsewhere (unless --variants)
+STEPS = ("cameras", "segment", "crop", "solve", "evaluate")
+
+
+@dataclass
+class Settings:
+    mode: str
+    scenes: list
+    variants: dict = field(default_factory=dict)  # scene -> [variant]
+    work: str = DEFAULT_WORK
+    render_spp: int = RENDER_SPP
+
+
+def _names(text, known, what: str) -> list[str]:
+    if text is None:
+        return None
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    unknown = [n for n in names if n not in known]
+    if not names or unknown:
+        raise SceneError(f"bench duplicates --{what}", what, f"a comma-separated list of {', '.join(known)}")
+    return names
+
+
+def settings_from(quick: bool, scenes, variants, work) -> Settings:
+    from ..synthesize.duplicates import DUPLICATES_PRESETS
+
+    scenes = _names(scenes, sorted(DUPLICATES_PRESETS), "scenes") or list(QUICK_SCENES if quick else SCENES)
+    chosen = _names(variants, list(VARIANTS), "variants")
+    per_scene = {}
+    for scene in scenes:
+        if chosen is not None:
+            per_scene[scene] = chosen
+        elif quick or scene not in ABLATION_SCENES:
+            per_scene[scene] = ["default"]
+        else:
+            per_scene[scene] = list(VARIANTS)
+    mode = "quick" if quick else "full"
+    return Settings(mode=mode, scenes=scenes, variants=per_scene, work=str(work or DEFAULT_WORK))
+
+
+# ---------------------------------------------------------------------------------------------
+# Steps
+# ---------------------------------------------------------------------------------------------
+
+
+def measure(fn, *args, **kwargs) -> tuple[object, dict]:
+    """(result, or the SceneError it stopped with; {wall_s, cpu_s, peak_rss_mb, rss_growth_mb})
+    of one call in this process."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    with PeakRSS() as memory:
+        try:
+            out = fn(*args, **kwargs)
+        except SceneError as stop:
+            out = stop
+    return out, {
+        "wall_s": time.perf_counter() - wall,
+        "cpu_s": time.process_time() - cpu,
+        "peak_rss_mb": memory.peak / 2**20,
+        "rss_growth_mb": memory.growth / 2**20,
+    }
+
+
+class Stopped(Exception):
+    """A step stopped with a SceneError, now or in an earlier run (its message in steps.json)."""
+
+
+class Ledger:
+    """steps.json in a folder: each step's measurements, written as soon as it ran, so that a
+    resumed run reports the times of the steps it skips. A step that stopped with a SceneError
+    is a result too (the ablation that registers nothing): its time and message are kept, and a
+    resumed run reports it again without running it (delete its entry to retry)."""
+
+    def __init__(self, folder: Path):
+        self.path = Path(folder) / "steps.json"
+        self.steps = json.loads(self.path.read_text()) if self.path.exists() else {}
+
+    def run(self, step: str, output: Path, fn, *args, **kwargs) -> dict | None:
+        if Path(output).exists():
+            log.info("bench duplicates: %s exists, %s skipped", output, step)
+            return self.steps.get(step)
+        if (self.steps.get(step) or {}).get("error"):
+            raise Stopped(self.steps[step]["error"])
+        out, measured = measure(fn, *args, **kwargs)
+        if isinstance(out, SceneError):
+            measured["error"] = str(out)
+        self._write(step, measured)
+        if isinstance(out, SceneError):
+            raise Stopped(str(out)) from out
+        return measured
+
+    def _write(self, step: str, measured: dict):
+        self.steps[step] = measured
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path.write_text(json.dumps(self.steps, indent=1) + "\n")
+
+
+def _render(preset: str, out: Path, spp: int):
+    from ..synthesize import stage as synthesize
+
+    synthesize.run("duplicates", out, {"preset": preset}, spp=spp)
+
+
+def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, str]:
+    """The capture of `preset`: an earlier render in REUSE if its config is exactly the preset's,
+    else WORK/captures/<preset> (rendered now unless there). (folder, measurements, source)."""
+    earlier = REUSE / preset
+    config = REUSE / f"{preset}.json"
+    if (earlier / "ground_truth").is_dir() and config.exists():
+        if json.loads(config.read_text()) == {"preset": preset}:
+            return earlier, None, f"reused {earlier} ({config.name}: the preset alone)"
+    out = work / "captures" / preset
+    measured = Ledger(work / "captures").run(f"render {preset}", out, _render, preset, out, spp)
+    return out, measured, f"rendered at {spp} spp"
+
+
+def shared_steps(capture: Path, scene_dir: Path, ledger: Ledger):
+    """cameras and segment: what every variant of a scene starts from."""
+    from ..cameras import stage as cameras
+    from ..segment import stage as segment
+
+    image = capture / "images" / "view_000.exr"
+    ledger.run(
+        "cameras", scene_dir / "cameras", cameras.run, capture / "sparse", scene_dir / "cameras",
+        images_dir=capture / "images", progress=False,
+    )  # fmt: skip
+    ledger.run("segment", scene_dir / "segmentation", segment.run, image, scene_dir / "segmentation")
+
+
+def _crops(scene_dir: Path, crops: Path, ids: list[int], settings):
+    from ..duplicates import stage
+
+    masks = scene_dir / "segmentation" / "masks" / "view_000.png"
+    for i in ids:
+        crop, features = crops / f"instance_{i:03d}.npz", crops / f"instance_{i:03d}.features.npz"
+        if not (crop.exists() and features.exists()):
+            stage.run_crop(scene_dir / "cameras", masks, i, crop, features, settings)
+
+
+def variant_steps(capture: Path, scene_dir: Path, variant: str, ledger: Ledger):
+    """crop, solve and evaluate of one variant."""
+    from ..duplicates import stage
+    from ..evaluate import stage as evaluate
+
+    settings = stage.settings_from(VARIANTS[variant])
+    folder = scene_dir / variant
+    seg = scene_dir / "segmentation"
+    ids = [int(e["id"]) for e in json.loads((seg / "instances.json").read_text())["instances"]]
+    crops = folder / "crops"
+    crops.mkdir(parents=True, exist_ok=True)
+    done = folder / "crops.done"  # the crops folder fills one instance at a time
+    made = [crops / f"instance_{i:03d}.features.npz" for i in ids]
+    if not done.exists():
+        if not all(path.exists() for path in made):  # all there: another run made them, untimed
+            ledger.run("crop", done, _crops, scene_dir, crops, ids, settings)
+        done.write_text("\n".join(map(str, ids)) + "\n")
+    ledger.run(
+        "solve", folder / "duplicates", stage.run_solve, scene_dir / "cameras", seg / "masks" / "view_000.png",
+        seg / "instances.json", crops, crops, folder / "duplicates", settings, progress=False,
+    )  # fmt: skip
+    ledger.run(
+        "evaluate", folder / "report", evaluate.run_duplicates, seg, folder / "duplicates",
+        capture / "ground_truth", capture / "images", folder / "report",
+    )  # fmt: skip
+
+
+def run_scene(preset: str, variants: list[str], work: Path, spp: int) -> list[dict]:
+    """Every variant of one scene: its rows (metrics, measurements, or the error that stopped it)."""
+    capture, render, source = capture_of(preset, work, spp)
+    scene_dir = work / preset
+    rows, error, shared = [], None, Ledger(scene_dir)
+    try:
+        shared_steps(capture, scene_dir, shared)
+    except Stopped as stop:
+        error = str(stop)
+    instances = scene_dir / "segmentation" / "instances.json"
+    segmented = len(json.loads(instances.read_text())["instances"]) if instances.exists() else None
+    for variant in variants:
+        row = {"scene": preset, "variant": variant, "capture": str(capture), "capture_source": source}
+        own = Ledger(scene_dir / variant)
+        if error is None:
+            try:
+                variant_steps(capture, scene_dir, variant, own)
+            except Stopped as stop:
+                row["error"] = str(stop)
+                log.error("bench duplicates: %s %s stopped: %s", preset, variant, stop)
+        else:
+            row["error"] = error
+        row["render"] = render
+        row["segmented"] = segmented
+        row["steps"] = {**shared.steps, **own.steps}
+        metrics = scene_dir / variant / "report" / "metrics.json"
+        row["metrics"] = json.loads(metrics.read_text()) if metrics.exists() else None
+        solved = scene_dir / variant / "duplicates" / "duplicates.json"
+        row["duplicates"] = json.loads(solved.read_text()) if solved.exists() else None
+        rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# The tables
+# ---------------------------------------------------------------------------------------------
+
+
+def _get(document, *path):
+    for key in path:
+        if document is None:
+            return None
+        document = document.get(key) if isinstance(document, dict) else None
+    return document
+
+
+def copies(preset: str) -> str:
+    return preset.split("-")[1]
+
+
+def table_row(row: dict) -> dict:
+    """One line of the table from a row's metrics.json, duplicates.json and measurements."""
+    from ..evaluate.duplicates import PAPER_TABLE2
+
+    m = row["metrics"]
+    steps = row["steps"] or {}
+    out = {"scene": row["scene"], "variant": row["variant"], "error": row.get("error")}
+    out["iou"] = _get(m, "masks", "mean_iou")
+    counts = _get(m, "counts") or {}
+    out["truth"] = counts.get("truth")
+    out["segmented"] = counts.get("segmented", row.get("segmented"))
+    registered = _get(row["duplicates"], "registered_by_colmap")
+    placed = _get(row["duplicates"], "placed")
+    out["registered"] = None if registered is None else len(registered)
+    out["placed"] = None if placed is None else len(placed)
+    out["instances"] = "/".join(
+        "-" if out[k] is None else str(out[k]) for k in ("truth", "segmented", "registered", "placed")
+    )
+    for stage in ("before", "after"):
+        rotation = _get(m, "poses", stage, "rotation")
+        out[f"rot_{stage}_mean"] = _get(rotation, "error_deg", "mean")
+        out[f"rot_{stage}_median"] = _get(rotation, "error_deg", "median")
+        out[f"swing_{stage}_mean"] = _get(rotation, "symmetry", "swing_deg", "mean")
+        out[f"twist_{stage}_mean"] = _get(rotation, "symmetry", "twist_deg", "mean")
+        out[f"trans_{stage}_mean"] = _get(m, "poses", stage, "translation", "error_fraction_of_diagonal", "mean")
+        out[f"evaluated_{stage}"] = _get(m, "poses", stage, "evaluated")
+    out["chamfer"] = _get(m, "mesh", "chamfer_fraction_of_diagonal")
+    out["chamfer_icp"] = _get(m, "mesh", "icp", "chamfer_fraction_of_diagonal")
+    paper = PAPER_TABLE2.get(copies(row["scene"]), {})
+    out["paper_rot"], out["paper_trans"], out["paper_chamfer"] = (
+        paper.get(k) for k in ("rotation_deg", "translation", "chamfer")
+    )
+    for step in STEPS:
+        out[f"{step}_s"] = _get(steps, step, "wall_s")
+    peaks = [s["peak_rss_mb"] for s in steps.values() if s]
+    out["peak_rss_mb"] = max(peaks) if peaks else None
+    timings = _get(row["duplicates"], "timings") or {}
+    out["match_and_map_s"] = timings.get("match_and_map_s")
+    pairs = _get(row["duplicates"], "pairs")
+    out["pairs"] = None if pairs is None else len(pairs)
+    return out
+
+
+ACCURACY_COLUMNS = [
+    ("scene", "scene", "s"),
+    ("variant", "variant", "s"),
+    ("iou", "mask IoU", ".3f"),
+    ("instances", "instances truth/seg/COLMAP/placed", "s"),
+    ("rot_before_mean", "rot. before mean [deg]", ".3f"),
+    ("rot_before_median", "median", ".3f"),
+    ("rot_after_mean", "rot. after mean [deg]", ".3f"),
+    ("rot_after_median", "median", ".3f"),
+    ("paper_rot", "paper rot. [deg]", ".3f"),
+    ("trans_before_mean", "transl. before [diag]", ".4f"),
+    ("trans_after_mean", "transl. after [diag]", ".4f"),
+    ("paper_trans", "paper transl.", ".3f"),
+    ("chamfer", "Chamfer [diag]", ".4f"),
+    ("chamfer_icp", "after ICP", ".4f"),
+    ("paper_chamfer", "paper Chamfer", ".3f"),
+]
+SYMMETRY_COLUMNS = [
+    ("scene", "scene", "s"),
+    ("variant", "variant", "s"),
+    ("swing_before_mean", "swing before mean [deg]", ".3f"),
+    ("twist_before_mean", "twist before mean [deg]", ".3f"),
+    ("swing_after_mean", "swing after mean [deg]", ".3f"),
+    ("twist_after_mean", "twist after mean [deg]", ".3f"),
+    ("rot_after_mean", "rot. after mean [deg]", ".3f"),
+]
+COST_COLUMNS = [
+    ("scene", "scene", "s"),
+    ("variant", "variant", "s"),
+    ("cameras_s", "cameras [s]", ".1f"),
+    ("segment_s", "segment [s]", ".1f"),
+    ("crop_s", "crop + features [s]", ".1f"),
+    ("pairs", "pairs", "d"),
+    ("match_and_map_s", "match + map [s]", ".1f"),
+    ("solve_s", "solve [s]", ".1f"),
+    ("evaluate_s", "evaluate [s]", ".1f"),
+    ("peak_rss_mb", "peak RSS [MB]", ".0f"),
+]
+
+
+def write_markdown(out: Path, report: dict) -> str:
+    lines = report["table"]
+    text = [
+        f"# invrender bench duplicates ({report['mode']}; {report['seconds']:.0f} s)",
+        "",
+        "Rotation error: degrees, after the rotation that best aligns the recovered object frame to the "
+        "true one; translation: the centres' error after a robust similarity, as a fraction of the object's "
+        "diagonal; Chamfer: the shared mesh against the true object, fraction of the diagonal. Before: "
+        "COLMAP's poses; after: render-and-compare. The paper's Table 2 (a colour box) beside each row of "
+        "the same number of copies.",
+        "",
+        format_table("Poses and shape, beside the paper's Table 2", ACCURACY_COLUMNS, lines),
+    ]
+    cans = [line for line in lines if line["swing_after_mean"] is not None or line["swing_before_mean"] is not None]
+    if cans:
+        text.append(
+            format_table("Cans: the rotation error split into swing (axis tilt) and twist", SYMMETRY_COLUMNS, cans)
+        )
+    text.append(format_table("Wall time of each step and peak memory", COST_COLUMNS, lines))
+    text.append(
+        "Times: wall clock of each stage's Python entry point in this process ('-': not reached, the row "
+        "stopped before it, or made by another run and reused); peak RSS: this process's resident set "
+        "while the steps ran (psutil, every 2 ms), the largest over the row's steps."
+    )
+    text.append("")
+    errors = [f"{line['scene']} {line['variant']}: {line['error']}" for line in lines if line["error"]]
+    text += [f"STOPPED: {e}" for e in errors]
+    text.append("Machine: " + ", ".join(f"{k}={v}" for k, v in report["machine"].items()))
+    text += [f"NOTE: {n}" for n in report["notes"]]
+    markdown = "\n".join(text) + "\n"
+    (out / "duplicates.md").write_text(markdown)
+    return markdown
+
+
+# ---------------------------------------------------------------------------------------------
+# The benchmark
+# ---------------------------------------------------------------------------------------------
+
+
+def run(
+    quick: bool = False, out="docs/benchmarks", device: str | None = None, scenes=None, variants=None, work=None
+) -> dict:
+    """Every scene x variant through the pipeline (resuming in `work`), the tables under `out`."""
+    quiet_pyopencl()
+    started, load_start = time.time(), os.getloadavg()
+    settings = settings_from(quick, scenes, variants, work)
+    work, out = Path(settings.work), Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    work.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for scene in settings.scenes:
+        log.info("bench duplicates: %s, variants %s", scene, settings.variants[scene])
+        rows += run_scene(scene, settings.variants[scene], work, settings.render_spp)
+        write_report(out, settings, rows, started, load_start, device)  # after each scene: partial runs count
+    report = write_report(out, settings, rows, started, load_start, device)
+    sys.stdout.write((out / "duplicates.md").read_text())
+    sys.stdout.flush()
+    return report
+
+
+def write_report(out: Path, settings: Settings, rows, started, load_start, device) -> dict:
+    notes = []
+    if settings.mode == "quick":
+        notes.append("quick: the -ci fixtures (320 x 240), the default variant: checks the plumbing, not accuracy")
+    results = {"work": settings.work, "rows": rows, "table": [table_row(row) for row in rows]}
+    report = run_report("duplicates", settings, "not used", notes, started, load_start, device, results)
+    (out / "duplicates.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
+    write_markdown(out, report)
+    return report
