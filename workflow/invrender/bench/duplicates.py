@@ -39,9 +39,11 @@ REUSE = Path("/tmp/dupgen")  # earlier renders: REUSE/<preset>/ made from REUSE/
 SCENES = ("box-10-hd", "can-10-hd", "box-20-hd", "can-20-hd", "box-6-hd")
 QUICK_SCENES = ("box-6-ci", "can-6-ci")  # 15 pairs each: matching, not the renders, costs the time
 VARIANTS = {
-    "default": {},  # xfeat with the rotation search
-    "no-rotation-search": {"rotation_search": False},  # the ablation (section 3.1's rotation search off)
-    "sift": {"matcher": "sift"},
+    # xfeat with the rotation search; refinement on, so that one run gives COLMAP's poses
+    # (poses_colmap.json, "before") and the refined ones ("after"): the workflow's default is off
+    "default": {"refine": True},
+    "no-rotation-search": {"rotation_search": False, "refine": True},  # the ablation (section 3.1)
+    "sift": {"matcher": "sift", "refine": True},
 }
 ABLATION_SCENES = ("box-10-hd",)  # every variant here; the default alone elsewhere (unless --variants)
 STEPS = ("cameras", "segment", "crop", "solve", "evaluate")
