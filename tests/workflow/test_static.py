@@ -152,7 +152,7 @@ BAD_CONFIGS = {
     "typo at the top": (
         {"render": {"spp": 4}, "scene": {}},
         [
-            "config: scene: unknown key; allowed: device, scenes, geometry, features, gradients, render, "
+            "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
             "milo, evaluate, edit, export"
         ],
     ),

@@ -96,10 +96,10 @@ checkpoint segment:
     output:
         report(
             directory("results/{scene}/segmentation"),
-            patterns=["overlay.png"],
+            patterns=["{name}.png"],
             caption="../report/segment.rst",
             category="Segmentation",
-            labels={"scene": "{scene}", "file": "overlay.png"},
+            labels={"scene": "{scene}", "figure": "{name}"},
         ),
     log:
         "results/{scene}/logs/segment.log",
