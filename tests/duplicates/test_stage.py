@@ -47,7 +47,7 @@ def crop_all(root, ids=range(1, 5)):
 
 
 def solve(root):
-    return stage.run_solve(
+    return stage.run(
         root / "cameras",
         root / "ids.png",
         root / "instances.json",

@@ -213,7 +213,7 @@ def cmd_duplicates(args):
     if args.step == "crop":
         stage.run_crop(args.cameras, args.masks, args.instance, args.crop, args.features, settings, image=args.image)
     else:
-        stage.run_solve(
+        stage.run(
             args.cameras, args.masks, args.instances, args.crops, args.features, args.out, settings, image=args.image
         )
 

@@ -201,7 +201,7 @@ def variant_steps(capture: Path, scene_dir: Path, variant: str, ledger: Ledger):
             ledger.run("crop", done, _crops, scene_dir, crops, ids, settings)
         done.write_text("\n".join(map(str, ids)) + "\n")
     ledger.run(
-        "solve", folder / "duplicates", stage.run_solve, scene_dir / "cameras", seg / "masks" / "view_000.png",
+        "solve", folder / "duplicates", stage.run, scene_dir / "cameras", seg / "masks" / "view_000.png",
         seg / "instances.json", crops, crops, folder / "duplicates", settings, progress=False,
     )  # fmt: skip
     ledger.run(

@@ -50,7 +50,7 @@ from . import hull, mapping, matching, refine
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
-__all__ = ["Settings", "run_crop", "run_solve"]
+__all__ = ["Settings", "run_crop", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -198,7 +198,7 @@ def _carve(ids, poses, K, points, settings: Settings) -> Mesh:
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
-    """Match, map, carve and refine; returns everything run_solve writes (COLMAP's frame)."""
+    """Match, map, carve and refine; returns everything run writes (COLMAP's frame)."""
     started = time.perf_counter()
     pairs, pair_report = match_all(crops, features, settings, progress)
     if not any(len(xy_a) for xy_a, _ in pairs.values()):
@@ -263,7 +263,7 @@ def _summary(result) -> dict:
     return {**out, "reinitialised": list(result.reinitialised), "initialised": list(result.initialised)}
 
 
-def run_solve(
+def run(
     cameras_dir,
     masks_path,
     instances_path,
