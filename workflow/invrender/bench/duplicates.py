@@ -5,7 +5,7 @@ Per scene (a preset of invrender.synthesize.duplicates, docs/duplicates-fixtures
 (the stage's Settings overridden, VARIANTS), the pipeline as the workflow runs it, each step a
 stage's Python entry point timed with its peak memory:
 
-    capture   synthesize duplicates at RENDER_SPP (or an earlier render of the same preset, REUSE)
+    capture   synthesize duplicates at RENDER_SPP (or an earlier render, $INVRENDER_DUPLICATES_CAPTURES)
     cameras   the capture's COLMAP model -> WORK/SCENE/cameras        (shared by the variants)
     segment   the opencv backend -> WORK/SCENE/segmentation            (shared by the variants)
     crop      per instance: crop + features -> WORK/SCENE/VARIANT/crops
@@ -13,7 +13,7 @@ stage's Python entry point timed with its peak memory:
     evaluate  against the truth -> WORK/SCENE/VARIANT/report/metrics.json
 
 A step whose output exists is skipped (resume); its time is then the one recorded when it ran
-(steps.json beside it), or none if another run made it (a folder laid out like /tmp/dev/pipe.sh's,
+(steps.json beside it), or none if another run made it (a folder laid out by hand-run stages,
 copied in). A step that stops with a SceneError ends its row with the message; the others go on.
 """
 
@@ -34,7 +34,9 @@ log = logging.getLogger("invrender.bench")
 
 DEFAULT_WORK = "results/bench/duplicates"
 RENDER_SPP = 64
-REUSE = Path("/tmp/dupgen")  # earlier renders: REUSE/<preset>/ made from REUSE/<preset>.json
+# Earlier renders to reuse (the folder `invrender synthesize duplicates --out DIR/<preset>` wrote
+# beside DIR/<preset>.json): $INVRENDER_DUPLICATES_CAPTURES, else none.
+REUSE_VARIABLE = "INVRENDER_DUPLICATES_CAPTURES"
 # The order they run in: the acceptance's scenes first (box, 10 and 20 copies), cans beside them.
 SCENES = ("box-10-hd", "can-10-hd", "box-20-hd", "can-20-hd", "box-6-hd")
 QUICK_SCENES = ("box-6-ci", "can-6-ci")  # 15 pairs each: matching, not the renders, costs the time
@@ -148,10 +150,12 @@ def _render(preset: str, out: Path, spp: int):
 
 
 def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, str]:
-    """The capture of `preset`: an earlier render in REUSE if its config is exactly the preset's,
-    else WORK/captures/<preset> (rendered now unless there). (folder, measurements, source)."""
-    earlier = REUSE / preset
-    config = REUSE / f"{preset}.json"
+    """The capture of `preset`: an earlier render in $INVRENDER_DUPLICATES_CAPTURES if its config
+    is exactly the preset's, else WORK/captures/<preset> (rendered now unless there). (folder,
+    measurements, source)."""
+    reuse = Path(os.environ.get(REUSE_VARIABLE) or work / "captures")
+    earlier = reuse / preset
+    config = reuse / f"{preset}.json"
     if (earlier / "ground_truth").is_dir() and config.exists():
         if json.loads(config.read_text()) == {"preset": preset}:
             return earlier, None, f"reused {earlier} ({config.name}: the preset alone)"
