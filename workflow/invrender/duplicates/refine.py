@@ -39,6 +39,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from ..scene.types import Mesh, SceneError
+from .crops import instance_boxes
 
 __all__ = ["RefineResult", "refine_poses", "project", "rasterise_silhouette", "silhouette", "surface_samples"]
 
@@ -182,16 +183,6 @@ def _levels(ids, K, instance_id: int, box, sides, margin: float) -> list[_Target
         target = _target(ids, K, instance_id, box, side, margin)
         if not out or target.n != out[-1].n:
             out.append(target)
-    return out
-
-
-def _boxes(ids: np.ndarray) -> dict[int, tuple[int, int, int, int]]:
-    out = {}
-    for i in np.unique(ids):
-        if i == 0:
-            continue
-        ys, xs = np.nonzero(ids == i)
-        out[int(i)] = (int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
     return out
 
 
@@ -490,7 +481,7 @@ def _check_inputs(mesh, K, ids, image, poses, unregistered) -> dict:
             raise SceneError(
                 where, f"poses[{i}]", "a finite 4 x 4 T_cam_from_obj with the object in front of the camera"
             )
-    boxes = _boxes(np.asarray(ids))
+    boxes = instance_boxes(np.asarray(ids))
     missing = sorted((set(poses) | set(unregistered)) - set(boxes))
     if missing:
         raise SceneError(
