@@ -17,6 +17,10 @@ import pytest
 import yaml
 from workflow_helpers import colmap_image_names, job_counts, ran_jobs, read_image, read_json, snakemake
 
+# One worker runs this module: its tests share the `built` captures and build on each other's
+# outputs (the boxes' duplicates chain, about a third of the suite's time, once, not per worker).
+pytestmark = pytest.mark.xdist_group("workflow_rules")
+
 VIEWS = {"room": 2, "boxes": 1}
 WIDTH, HEIGHT = 32, 24  # the room's views
 SIZES = {"room": (HEIGHT, WIDTH), "boxes": (360, 480)}  # tests/workflow/config.yaml
