@@ -236,3 +236,16 @@ def test_the_stage_scores_an_exact_recovery_through_the_cli(tree, recovered_scen
     assert {f"relight_{s}_{a}.png" for s in ("warm_sun", "overcast") for a in ("in_place", "rearranged")} <= names
     with pytest.raises(SceneError, match="scene.json: version: expected a v2 scene"):
         ap.recovered_side(tree["truth"] / "scene")
+
+
+def test_without_an_alignment_the_surface_and_the_rearrangement_are_null(tree, recovered_scene, tmp_path):  # noqa: F811
+    ours, truth = ap.recovered_side(recovered_scene[0]), ap.truth_side(tree["truth"])
+    look = ap.evaluate(ours, truth, None, tmp_path, spp=1)
+    assert look["object"] is None and look["support"] is None and look["table1"]["ours"]["albedo_psnr_db"] is None
+    relit = look["relighting"]
+    assert relit["psnr_db"] is None and "no alignment" in relit["arrangement"]["reason"]
+    assert relit["in_place_psnr_db"] > 5 and look["env"]["mse"] == 0.0 and "mse_with_albedo_scale" not in look["env"]
+    small = Camera("view_000.exr", "PINHOLE", 48, 36, np.array([40.0, 40.0, 24.0, 18.0]), np.eye(3), np.zeros(3))
+    ours.camera = small
+    with pytest.raises(SceneError, match="camera: expected the photograph's 96 x 72, got 48 x 36"):
+        ap.evaluate(ours, truth, None, tmp_path / "x", spp=1)

@@ -77,6 +77,7 @@ __all__ = [
     "aligned_correspondence",
     "env_errors",
     "read_training",
+    "check_sides",
     "evaluate",
 ]
 
@@ -420,6 +421,17 @@ def _relight_figure(path, ours, truth, mask, exposure) -> None:
     figures.triptych(path, left, right, ("recovered", "truth"), mask=mask, note=note)
 
 
+def check_sides(recovered: Side, truth: Side) -> None:
+    """What the comparison needs of the two sides that each alone does not show: one image size."""
+    if (recovered.camera.width, recovered.camera.height) != (truth.camera.width, truth.camera.height):
+        raise SceneError(
+            "evaluate appearance",
+            "camera",
+            f"the photograph's {truth.camera.width} x {truth.camera.height}, got "
+            f"{recovered.camera.width} x {recovered.camera.height}",
+        )
+
+
 def evaluate(
     recovered: Side,
     truth: Side,
@@ -435,13 +447,7 @@ def evaluate(
     ``out_dir``. ``chamfer``: issue 13's mesh metrics (``duplicates.mesh_metrics``) for the table;
     ``training``: the material stage's time and memory (``read_training``)."""
     out = Path(out_dir)
-    if (recovered.camera.width, recovered.camera.height) != (truth.camera.width, truth.camera.height):
-        raise SceneError(
-            "evaluate appearance",
-            "camera",
-            f"the photograph's {truth.camera.width} x {truth.camera.height}, got "
-            f"{recovered.camera.width} x {recovered.camera.height}",
-        )
+    check_sides(recovered, truth)
     surfaces = {"object": None, "support": None}
     if alignment is not None:
         surfaces["object"] = _surface(

@@ -242,6 +242,7 @@ def run_duplicates(
     sides = None
     if scene_dir is not None:  # read and checked before any work
         sides = (appearance.recovered_side(scene_dir), appearance.truth_side(truth_dir))
+        appearance.check_sides(*sides)
     cost = appearance.read_training(training)
     photo = None
     if images_dir is not None:
