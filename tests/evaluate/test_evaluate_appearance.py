@@ -249,3 +249,18 @@ def test_without_an_alignment_the_surface_and_the_rearrangement_are_null(tree, r
     ours.camera = small
     with pytest.raises(SceneError, match="camera: expected the photograph's 96 x 72, got 48 x 36"):
         ap.evaluate(ours, truth, None, tmp_path / "x", spp=1)
+
+
+@pytest.mark.parametrize(
+    ("model", "params"),
+    [("PINHOLE", [1400.0, 1350.0, 800.0, 600.0]), ("SIMPLE_PINHOLE", [1400.0, 790.0, 610.0]),
+     ("OPENCV", [1400.0, 1350.0, 800.0, 600.0, -0.1, 0.02, 0.001, -0.002])],
+)  # fmt: skip
+def test_an_hd_camera_is_scaled_to_the_relighting_size_pixel_for_pixel(model, params):
+    R = rot([0.3, 1.0, 0.2], 25.0)
+    hd = Camera("view_000.exr", model, 1600, 1200, np.array(params), R, np.array([0.1, -0.2, 1.5]))
+    small = relight.scaled_camera(hd)
+    assert (small.width, small.height) == (640, 480) and small.model == model
+    points = np.random.default_rng(0).uniform(-0.3, 0.3, (50, 3))
+    assert np.allclose(project_points(small, points), 0.4 * project_points(hd, points), atol=1e-9)
+    assert relight.scaled_camera(small) is small  # already small enough

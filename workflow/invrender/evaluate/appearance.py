@@ -372,15 +372,20 @@ def _surface(out: Path, name: str, recovered: Atlas, truth: Atlas, mesh, similar
 def _rearranged(recovered: Side, truth: Side, alignment: Alignment, new_poses: dict, sky) -> tuple[Scene, Scene]:
     """Both scenes with the copies at the new poses, in the true world: the truth's object at
     T'_i, the recovered object at T'_i A, the recovered support moved by the world similarity."""
-    A = alignment.object.matrix()
+    A, camera = alignment.object.matrix(), relight.scaled_camera(truth.camera)
     ours = relight.placed_scene(
-        recovered.object_mesh, recovered.object_atlas, {i: T @ A for i, T in new_poses.items()}, sky, truth.camera,
+        recovered.object_mesh, recovered.object_atlas, {i: T @ A for i, T in new_poses.items()}, sky, camera,
         recovered.support_mesh, recovered.support_atlas, alignment.world.matrix(),
     )  # fmt: skip
     theirs = relight.placed_scene(
-        truth.object_mesh, truth.object_atlas, new_poses, sky, truth.camera, truth.support_mesh, truth.support_atlas
+        truth.object_mesh, truth.object_atlas, new_poses, sky, camera, truth.support_mesh, truth.support_atlas
     )
     return ours, theirs
+
+
+def _in_place(side: Side, sky) -> Scene:
+    """The scene as it is under another sky, seen by its (scaled) photograph camera."""
+    return replace(set_sky(side.scene, sky), cameras=[relight.scaled_camera(side.camera)])
 
 
 def _relighting(out: Path, recovered: Side, truth: Side, alignment, spp, seed, device) -> dict:
@@ -391,7 +396,7 @@ def _relighting(out: Path, recovered: Side, truth: Side, alignment, spp, seed, d
         new_poses, arrangement = relight.rearranged_poses(truth.object_mesh, truth.poses, centroid, truth.camera, seed)
     rows = {}
     for sky_name, sky in relight.skies().items():
-        pairs = {"in_place": (set_sky(recovered.scene, sky), set_sky(truth.scene, sky))}
+        pairs = {"in_place": (_in_place(recovered, sky), _in_place(truth, sky))}
         if new_poses is not None:
             pairs["rearranged"] = _rearranged(recovered, truth, alignment, new_poses, sky)
         rows[sky_name] = {}

@@ -30,6 +30,8 @@ exposure that maps the true render's 99th percentile over those pixels to 1.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..scene.cameras import project_points
@@ -40,6 +42,7 @@ from .metrics import psnr, reference_exposure, tone_map
 from .views import evaluation_seed, renderer_for
 
 __all__ = [
+    "RELIGHT_MAX_SIDE",
     "SKY_SIZE",
     "SKIES",
     "OBJECT_SET",
@@ -49,10 +52,12 @@ __all__ = [
     "overcast_sky",
     "rearranged_poses",
     "placed_scene",
+    "scaled_camera",
     "compare",
     "masked_psnr",
 ]
 
+RELIGHT_MAX_SIDE = 640  # renders at most this many pixels wide or high (the camera scaled down)
 SKY_SIZE = 64  # cube texels of 1.4 degrees: the sun lobe (about 3 degrees wide) spans a few
 SUN_SHARPNESS = 300.0  # vMF lobe exp(k (cos theta - 1)): half width about 1 / sqrt(k) = 3.3 degrees
 LATTICE_CLEARANCE = 0.1  # lattice spacing 2 r (1 + this): bounding spheres a fifth of r apart
@@ -196,6 +201,25 @@ def placed_scene(
 
 
 # --- renders compared ---------------------------------------------------------------------------------
+
+
+def scaled_camera(camera: Camera, max_side: int = RELIGHT_MAX_SIDE) -> Camera:
+    """The camera with at most ``max_side`` pixels on its longer side: the image scaled by
+    k = max_side / longer side, so focal lengths and principal point times k (pixel (0, 0)'s
+    corner stays at 0); distortion acts on normalised coordinates and stays. An HD photograph's
+    twelve relighting renders would otherwise cost 11 times a 480 x 360 one's, and a PSNR over
+    the copies needs no more pixels than this."""
+    k = max_side / max(camera.width, camera.height)
+    if k >= 1:
+        return camera
+    width, height = max(1, round(camera.width * k)), max(1, round(camera.height * k))
+    sx, sy = width / camera.width, height / camera.height
+    params = np.asarray(camera.params, np.float64).copy()
+    if camera.model == "SIMPLE_PINHOLE":  # f, cx, cy
+        params[:3] *= [sx, sx, sy]
+    else:  # fx, fy, cx, cy (then OPENCV's distortion)
+        params[:4] *= [sx, sy, sx, sy]
+    return replace(camera, width=width, height=height, params=params)
 
 
 def masked_psnr(test, reference, mask, exposure: float) -> float:
