@@ -151,9 +151,10 @@ def poses_of(poses, ids):
 
 def test_evaluate_duplicates_scores_the_recovery(built):
     """The report of a synthetic duplicates scene: metrics.json with the keys docs/evaluate.md
-    lists, the segmentation scored against the true masks, and the outline figure."""
+    lists, the segmentation scored against the true masks, the recovered scene's appearance, and
+    the figures."""
     workdir, _ = built
-    snakemake(workdir, "--cores", "2", "results/boxes/duplicates")  # upstream, if not built here yet
+    snakemake(workdir, "--cores", "2", "results/boxes/scene")  # upstream, if not built here yet
     result = snakemake(workdir, "--cores", "2", "results/boxes/report")
     assert ran_jobs(result.stdout) == {"evaluate_duplicates": 1}
     report = workdir / "results/boxes/report"
@@ -169,6 +170,10 @@ def test_evaluate_duplicates_scores_the_recovery(built):
     assert after["registered"] >= 3 and after["rotation"]["error_deg"]["median"] >= 0
     assert metrics["mesh"] is None or metrics["mesh"]["chamfer_m"] > 0
     assert list(report.glob("outlines_*.png"))
+    look = metrics["appearance"]  # the first-guess scene: photograph colours under a white sky
+    assert metrics["inputs"]["scene"] == "results/boxes/scene" and look["material_stage"] is None
+    assert 0 < look["env"]["mse"] < 1 and 5 < look["relighting"]["in_place_psnr_db"] < 60
+    assert len(list(report.glob("relight_*_in_place.png"))) == 2 and (report / "env_kg.png").is_file()
 
 
 def test_a_multiview_scene_is_recovered_not_copied(built):

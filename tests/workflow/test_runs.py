@@ -80,8 +80,8 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
     override.write_text(yaml.safe_dump({"geometry": {"target_faces": 1000}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
     # Downstream of geometry: the room's gradients, recovery and all that reads them, and the
-    # boxes' scene baked on the new mesh and what reads it; segment and duplicates (upstream of
-    # geometry) do not run again, nor does evaluate_duplicates (it scores duplicates/).
+    # boxes' scene baked on the new mesh and what reads it (evaluate_duplicates scores its
+    # appearance); segment and duplicates (upstream of geometry) do not run again.
     assert job_counts(result.stdout) == RERUN_AFTER_GEOMETRY
     assert "Params have changed since last execution" in result.stdout
     # The same through --config, as one would type it.
@@ -91,7 +91,8 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
-    **dict.fromkeys(("gradients", "milo_train", "bake", "bake_duplicates", "evaluate", "edit"), 1),
+    **dict.fromkeys(("gradients", "milo_train", "bake", "bake_duplicates", "evaluate", "evaluate_duplicates"), 1),
+    "edit": 1,
     **dict.fromkeys(("features", "render", "export"), 2),
     "all": 1,
 }

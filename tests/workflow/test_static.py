@@ -22,7 +22,16 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "features", "render", "export", "evaluate", "evaluate_duplicates", "edit"}
 CHECKPOINT_RULES = {"duplicates_crop"}
-RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit"}
+RAY_TRACING_RULES = {
+    "synthesize",
+    "features",
+    "render",
+    "gradients",
+    "milo_train",
+    "evaluate",
+    "evaluate_duplicates",
+    "edit",
+}
 
 
 def test_lint_is_clean(tmp_path):

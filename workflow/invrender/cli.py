@@ -225,7 +225,18 @@ def cmd_evaluate(args):
     if args.duplicates:  # a duplicates scene: masks, poses and the shared mesh
         if not args.segmentation:
             raise SceneError("evaluate", "--segmentation", "the segment stage's folder beside --duplicates")
-        stage.run_duplicates(args.segmentation, args.duplicates, args.truth, args.images, args.out, seed=args.seed)
+        stage.run_duplicates(
+            args.segmentation,
+            args.duplicates,
+            args.truth,
+            args.images,
+            args.out,
+            seed=args.seed,
+            scene_dir=args.scene,
+            training=args.training,
+            spp=args.spp,
+            device=args.device,
+        )
         return
     for flag, value, what in (
         ("--scene", args.scene, "the recovered scene directory"),
@@ -494,7 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
             q.add_argument("--out", required=True, help="directory to write")
 
     p = stages.add_parser("evaluate", help="a recovered scene against the truth -> metrics.json + figures")
-    p.add_argument("--scene", help="the recovered scene directory (multiview)")
+    p.add_argument(
+        "--scene", help="the recovered scene directory (multiview; with --duplicates: also score its appearance)"
+    )
     p.add_argument(
         "--truth",
         required=True,
@@ -509,6 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--holdout", nargs="+", action="extend", metavar="CAMERA", help="camera names held back from training"
     )
     p.add_argument("--snapshots", help="directory of training snapshots iter_XXXXXX.npz")
+    p.add_argument(
+        "--training", help="with --duplicates --scene: the material stage's training.json (time, memory), if it exists"
+    )
     p.add_argument(
         "--sphere",
         nargs=5,

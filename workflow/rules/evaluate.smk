@@ -45,12 +45,16 @@ rule evaluate:
 rule evaluate_duplicates:
     """A recovered duplicates scene against the synthetic truth: mask IoU, instances registered,
     rotation error (a can's twist about its axis apart) and translation error after a similarity
-    alignment, before and after render-and-compare, and the shared mesh's Chamfer distance.
+    alignment, before and after render-and-compare, and the shared mesh's Chamfer distance; from
+    the recovered scene directory the shared material (albedo PSNR, roughness MSE), the sky (env
+    MSE) and relighting under two new skies with the copies rearranged (SfD's Table 1), with the
+    material stage's time and memory when its training.json is there.
     """
     input:
         segmentation=segmentation_dir,
         duplicates="results/{scene}/duplicates",
         capture="results/{scene}/capture",
+        scene="results/{scene}/scene",
     output:
         report(
             directory("results/{scene}/report"),
@@ -67,14 +71,19 @@ rule evaluate_duplicates:
     wildcard_constraints:
         scene=scenes_pattern([name for name in DUPLICATES if name in SYNTHETIC]),
     conda:
-        "../../envs/geometry.yaml"
-    threads: 1
+        "../../envs/render.yaml"
+    threads: 2
     resources:
-        mem_mb=2000,
-        runtime=20,
+        mem_mb=4000,
+        runtime=60,
+        gpu=gpu_request,
     params:
         seed=config["evaluate"]["seed"],
+        spp=config["evaluate"]["spp"],
+        device=device_option,
+        training="results/{scene}/material/training.json",
     shell:
         "invrender --log {log} evaluate --duplicates {input.duplicates}"
         " --segmentation {input.segmentation} --truth {input.capture}/ground_truth"
-        " --images {input.capture}/images --out {output} --seed {params.seed}"
+        " --images {input.capture}/images --scene {input.scene} --training {params.training}"
+        " --out {output} --seed {params.seed} --spp {params.spp} {params.device}"

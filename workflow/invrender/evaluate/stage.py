@@ -16,7 +16,9 @@
    PSNR at ``snapshot_spp`` (0: not rendered).
 
 A duplicates scene (issue 13) has other outputs and other metrics: ``run_duplicates`` scores its
-masks, poses and shared mesh (``duplicates.py``) into the same layout (metrics.json, outlines_<image>.png).
+masks, poses and shared mesh (``duplicates.py``) into the same layout (metrics.json, outlines_<image>.png),
+and with its recovered scene directory the shared material, the sky and relighting (issue 14,
+``appearance.py``, ``relight.py``).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from ..scene.capture import read_view
 from ..scene.format import SCENE_JSON, load_scene
 from ..scene.snapshots import check_snapshot, list_snapshots, load_snapshot
 from ..scene.types import ATLAS_MAPS, Scene, SceneError, require_positive
-from . import duplicates, figures
+from . import appearance, duplicates, figures
 from .correspond import DEFAULT_SAMPLES, DEFAULT_SIDE_MARGIN, correspond
 from .maps import DEFAULT_BALL_TEXELS, kg_on_common_cube, map_errors, truth_in_recovered_layout
 from .metrics import PSNR_CAP_DB, image_metrics
@@ -210,18 +212,38 @@ def run(
     return document
 
 
-def run_duplicates(segmentation_dir, duplicates_dir, truth_dir, images_dir, out_dir, seed: int = 0) -> dict:
+def run_duplicates(
+    segmentation_dir,
+    duplicates_dir,
+    truth_dir,
+    images_dir,
+    out_dir,
+    seed: int = 0,
+    scene_dir=None,
+    training=None,
+    spp: int = 64,
+    device=None,
+) -> dict:
     """Evaluate a duplicates scene: the segment stage's ``segmentation_dir`` (masks/, instances.json)
     and the duplicates stage's ``duplicates_dir`` (poses.json, poses_colmap.json if there,
     object.ply) against the capture's ``truth_dir`` (its ground_truth/); ``images_dir`` holds
-    the segmented photo (None: the figure on grey). Writes ``out_dir`` (metrics.json,
-    outlines_<image>.png) and returns metrics.json's document (docs/evaluate.md, "Duplicates")."""
+    the segmented photo (None: the figure on grey). With the recovered ``scene_dir`` also its
+    appearance (``appearance.py``: albedo, roughness, sky, relighting at ``spp``), and the material
+    stage's time and memory from ``training`` (its training.json) when that file exists. Writes
+    ``out_dir`` (metrics.json, outlines_<image>.png, the appearance figures) and returns
+    metrics.json's document (docs/evaluate.md, "Duplicates")."""
     from ..scene.images import read_image
 
     out_dir = Path(out_dir)
     check_output(out_dir, "evaluate")  # before the work, not after it
+    spp = require_positive("evaluate --spp", "samples per pixel", spp)
     started = time.perf_counter()
     inputs = duplicates.load_inputs(segmentation_dir, duplicates_dir, truth_dir)
+    sides = None
+    if scene_dir is not None:  # read and checked before any work
+        sides = (appearance.recovered_side(scene_dir), appearance.truth_side(truth_dir))
+        appearance.check_sides(*sides)
+    cost = appearance.read_training(training)
     photo = None
     if images_dir is not None:
         path = Path(images_dir) / Path(inputs["image"]).name
@@ -236,6 +258,10 @@ def run_duplicates(segmentation_dir, duplicates_dir, truth_dir, images_dir, out_
         duplicates.outline_figure(
             Path(tmp) / f"outlines_{inputs['stem']}.png", photo, inputs["truth_ids"], inputs["recovered_ids"], note
         )
+        look = None
+        if sides is not None:
+            alignment = appearance.Alignment.from_metrics(metrics)
+            look = appearance.evaluate(*sides, alignment, tmp, spp, seed, device, metrics["mesh"], cost)
         document = {
             "version": METRICS_VERSION,
             "mode": "duplicates",
@@ -246,9 +272,13 @@ def run_duplicates(segmentation_dir, duplicates_dir, truth_dir, images_dir, out_
                 "images": None if images_dir is None else str(images_dir),
                 "image": inputs["image"],
                 "seed": int(seed),
+                "scene": None if scene_dir is None else str(scene_dir),
+                "training": None if training is None else str(training),
+                "spp": spp,
             },
             "paper": {"table2_color_box": duplicates.PAPER_TABLE2},
             **metrics,
+            "appearance": look,
         }
         (Path(tmp) / "metrics.json").write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
     log.info(
@@ -274,6 +304,10 @@ def _duplicates_line(document: dict) -> str:
         parts.append(f"translation {after['translation']['error_fraction_of_diagonal']['mean']:.4f} of the diagonal")
     if mesh is not None:
         parts.append(f"Chamfer {mesh['chamfer_m']:.4g} m ({mesh['icp']['chamfer_m']:.4g} after ICP)")
+    look = document.get("appearance")
+    if look is not None:
+        ours = look["table1"]["ours"]
+        parts += [f"{key} {value:.4g}" for key, value in ours.items() if value is not None and "chamfer" not in key]
     return ", ".join(parts)
 
 
