@@ -15,7 +15,8 @@ exceeds them and the records come from the demo's small scenes on a busy 2-core 
   torch use what the allocation gives, so 2 on a 2-core machine means "more would help").
 
 Rules whose runtime follows the config (milo_train: common.smk, milo_runtime) get no runtime.
-Re-run this on the benchmarks of your own captures and paste its output into the profile.
+Re-run this on the benchmarks of your own captures and paste its output into the profile,
+leaving out the localrules (the Snakefile's: they run on the login node).
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ import math
 import sys
 from pathlib import Path
 
-# Rules whose benchmark file is named for another rule's file (same stage, another mode) are told
-# apart by their path; each rule writes results/{scene}/benchmarks/<rule>.tsv or <rule>/*.tsv.
+# Each rule writes results/{scene}/benchmarks/<rule>.tsv, or <rule>/<wildcards>.tsv per instance.
 RUNTIME_FROM_CONFIG = {"milo_train"}
 MEM_STEP_MB = 500
 MIN_MEM_MB = 1000
@@ -74,7 +74,7 @@ def main(argv: list[str]) -> int:
         rows = found[rule]
         request = resources(rows, rule)
         worst = f"max_rss {max(r['max_rss'] for r in rows):.0f} MB, s {max(r['s'] for r in rows):.1f}"
-        print(f"  {rule}:  # {len(rows)} records: {worst}")
+        print(f"  {rule}:  # {len(rows)} record{'s' if len(rows) > 1 else ''}: {worst}")
         for key, value in request.items():
             print(f"    {key}: {value}")
     return 0
