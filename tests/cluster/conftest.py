@@ -38,7 +38,6 @@ class Cluster:
     root: Path
     env: dict  # os.environ with SLURM_CONF: for sbatch, sacct, snakemake
     node: str
-    cpus: int
 
     def run(self, *cmd, check=True, timeout=60) -> str:
         result = subprocess.run(
@@ -307,23 +306,21 @@ def _start_cluster(stack: contextlib.ExitStack, root: Path) -> Cluster:
         slurmdbd,
         root / "log" / "slurmdbd.log",
     )
-    cluster = Cluster(root=root, env=env, node=node, cpus=int(dict(f.split("=") for f in hardware.split())["CPUs"]))
+    cluster = Cluster(root=root, env=env, node=node)
     cluster.run("sacctmgr", "-i", "add", "cluster", CLUSTER)
     cluster.run("sacctmgr", "-i", "add", "account", ACCOUNT, "Description=invrender tests", "Organization=invrender")
     cluster.run("sacctmgr", "-i", "add", "user", "root", f"Account={ACCOUNT}", f"DefaultAccount={ACCOUNT}")
 
     slurmctld = _start(stack, ["slurmctld", "-D", "-i"], root / "log" / "slurmctld.log", env)
     _wait("slurmctld", lambda: _succeeds(["scontrol", "ping"], env), 60, slurmctld, root / "log" / "slurmctld.log")
-    stack.callback(_cancel_all_jobs, cluster)  # before slurmd stops: job steps outlive it
     slurmd = _start(stack, ["slurmd", "-D"], root / "log" / "slurmd.log", env)
+    stack.callback(_cancel_all_jobs, cluster)  # unwound first: job steps would outlive slurmd
     idle = lambda: "idle" in cluster.run("sinfo", "-h", "-N", "-o", "%T", check=False)  # noqa: E731
     _wait("slurmd (node idle)", idle, 60, slurmd, root / "log" / "slurmd.log")
     return cluster
 
 
 def _link_default_conf(stack: contextlib.ExitStack, conf: Path):
-    if DEFAULT_CONF.exists() or DEFAULT_CONF.is_symlink():
-        _cannot_run(f"{DEFAULT_CONF} exists: this machine has a SLURM config of its own, which the test leaves alone")
     DEFAULT_CONF.parent.mkdir(parents=True, exist_ok=True)
     DEFAULT_CONF.symlink_to(conf)
     stack.callback(lambda: DEFAULT_CONF.unlink() if DEFAULT_CONF.is_symlink() else None)
@@ -342,5 +339,7 @@ def slurm_cluster(tmp_path_factory):
     if os.geteuid() != 0:
         _cannot_run("it starts slurmd, slurmctld, slurmdbd, munged and MariaDB, which needs root")
     _install_packages()
+    if DEFAULT_CONF.exists() or DEFAULT_CONF.is_symlink():
+        _cannot_run(f"{DEFAULT_CONF} exists: this machine has a SLURM config of its own, which the test leaves alone")
     with contextlib.ExitStack() as stack:
         yield _start_cluster(stack, tmp_path_factory.mktemp("slurm"))
