@@ -51,7 +51,7 @@ rule bake_duplicates:
     log:
         "results/{scene}/logs/bake.log",
     benchmark:
-        "results/{scene}/benchmarks/bake.tsv"
+        "results/{scene}/benchmarks/bake_duplicates.tsv"
     wildcard_constraints:
         scene=scenes_pattern(DUPLICATES),
     conda:

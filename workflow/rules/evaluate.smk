@@ -67,7 +67,7 @@ rule evaluate_duplicates:
     log:
         "results/{scene}/logs/evaluate.log",
     benchmark:
-        "results/{scene}/benchmarks/evaluate.tsv"
+        "results/{scene}/benchmarks/evaluate_duplicates.tsv"
     wildcard_constraints:
         scene=scenes_pattern([name for name in DUPLICATES if name in SYNTHETIC]),
     conda:
