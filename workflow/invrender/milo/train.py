@@ -16,11 +16,8 @@ run started at 0 or resumed at k.
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 import torch
 
@@ -237,27 +234,3 @@ class Training:
             schedule.load_state_dict(saved)
         torch.set_rng_state(state["torch_rng"])
         self.iteration, self.wall_time = int(state["iteration"]), float(state["wall_time"])
-
-
-class TrainingLog:
-    """log.csv, one row per iteration, appended as the run goes; a resumed run first drops the
-    rows after its checkpoint (the killed run's last iterations are computed again)."""
-
-    def __init__(self, path, resume_from: int = 0):
-        self.path = Path(path)
-        kept = []
-        if resume_from and self.path.exists():
-            with open(self.path, newline="") as handle:
-                kept = [row for row in csv.DictReader(handle) if int(row["iteration"]) <= resume_from]
-        with open(self.path, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, LOG_COLUMNS)
-            writer.writeheader()
-            writer.writerows(kept)
-
-    def append(self, row: dict) -> None:
-        with open(self.path, "a", newline="") as handle:
-            csv.DictWriter(handle, LOG_COLUMNS).writerow({key: _cell(row[key]) for key in LOG_COLUMNS})
-
-
-def _cell(value):
-    return f"{value:.6g}" if isinstance(value, float) else value
