@@ -30,7 +30,17 @@ def dry_run(tmp_path, scenes, *targets, check=True):
 # What a duplicates capture with cameras (a model, or a photograph's lens) builds: its one camera,
 # the segment checkpoint, the poses and shared mesh, the mesh unwrapped, the scene baked, and what
 # reads the scene. (duplicates_crop joins once the checkpoint has run.)
-DUPLICATES_CHAIN = ("cameras", "segment", "duplicates", "geometry", "bake_duplicates", "features", "render", "export")
+DUPLICATES_CHAIN = (
+    "cameras",
+    "segment",
+    "duplicates",
+    "geometry",
+    "duplicates_material",
+    "bake_duplicates",
+    "features",
+    "render",
+    "export",
+)
 
 
 def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):

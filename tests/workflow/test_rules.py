@@ -113,7 +113,7 @@ def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
     instances = read_json(workdir / "results/boxes/segmentation/instances.json")["instances"]
     assert len(instances) >= 3
     assert ran_jobs(result.stdout) == {
-        **dict.fromkeys(("cameras", "segment", "duplicates", "geometry", "bake_duplicates"), 1),
+        **dict.fromkeys(("cameras", "segment", "duplicates", "geometry", "duplicates_material", "bake_duplicates"), 1),
         "duplicates_crop": len(instances),
     }
     assert "ground_truth" not in result.stdout  # no job of the recovery reads the truth

@@ -15,6 +15,7 @@ from ..render.adjoint import GRAD_CHANNELS
 from ..render.losses import IMAGE_LOSSES, energy_excess, image_loss  # noqa: F401 (milo's losses, in one place)
 from .network import LOWER, UPPER
 
+
 def category_loss(probabilities: torch.Tensor) -> torch.Tensor:
     """Eq. 8: each texel one material (mean of -max_i P_i)."""
     return -probabilities.max(-1).values.mean()

@@ -29,8 +29,8 @@ from ..scene.atlas import AtlasTexels
 from ..scene.atomic import atomic_path, claim_dir
 from ..scene.cameras import read_cameras
 from ..scene.capture import read_view
-from ..scene.mesh_io import read_mesh
 from ..scene.checkpoints import RESUME
+from ..scene.mesh_io import read_mesh
 from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
 from ..scene.types import Camera, Maps, Scene, SceneError

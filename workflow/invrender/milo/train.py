@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+
 import numpy as np
 import torch
 
 from ..render.adjoint import GRAD_CHANNELS, backward, backward_seed
-from ..render.batches import ray_batch
+from ..render.batches import iteration_seed, ray_batch  # noqa: F401 (iteration_seed: milo's, kept importable here)
 from ..render.renderer import Renderer
 from ..scene.types import ATLAS_MAPS, Camera, Maps
 from .losses import image_loss, regularisers
@@ -48,13 +49,6 @@ LOG_COLUMNS = (
     "lr_mlp",
     "lr_template",
 )
-
-
-def iteration_seed(seed: int, iteration: int) -> int:
-    """The path samples' seed of one iteration: 63 bits, so backward_seed's flipped top bit is
-    another seed."""
-    state = np.random.SeedSequence([int(seed), int(iteration)]).generate_state(2, np.uint32)
-    return ((int(state[0]) << 32) | int(state[1])) & ((1 << 63) - 1)
 
 
 @dataclass

@@ -21,7 +21,11 @@ __all__ = [
     "SNAPSHOT_PATTERN",
     "SNAPSHOT_KEYS",
     "list_snapshots",
-    "drop_snapshots_after", "check_snapshot", "load_snapshot", "write_snapshot"]
+    "drop_snapshots_after",
+    "check_snapshot",
+    "load_snapshot",
+    "write_snapshot",
+]
 
 SNAPSHOT_PATTERN = re.compile(r"^iter_(\d{6,})\.npz$")
 SNAPSHOT_KEYS = (*ATLAS_MAPS, "kg", "iteration", "wall_time")
