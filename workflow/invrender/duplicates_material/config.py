@@ -11,12 +11,16 @@ from ..scene.settings import settings_hash as _settings_hash
 from ..scene.types import SceneError
 
 SUPPORTS = ("plane", "none")
+STARTS = ("photograph", "grey")
 
 _COMMON = {
     # The scene
     "support": "plane",  # the table or floor as its own quad and material (support.py), or none
     "support_resolution": 128,  # texels along the support atlas' longer side
     "sky_resolution": 8,  # N of the recovered 6 x N x N kg
+    # where the maps start: "photograph" (scene/first_guess.py: each texel's colour in the
+    # photograph, under a white sky, what bake shows before this stage) or "grey" (kd 0.5 everywhere)
+    "start": "photograph",
     # The estimator (render/, the MILO material model): exact visibility, shadows and inter-reflections
     "max_bounces": 2,
     "nee": True,  # next-event estimation: the sun-like peaks of an outdoor kg are found by light samples
@@ -72,6 +76,8 @@ def _check(s: dict, where: str) -> None:
             raise SceneError(where, key, f"a positive integer, got {s[key]!r}")
     if s["support"] not in SUPPORTS:
         raise SceneError(where, "support", f"one of {', '.join(SUPPORTS)}, got {s['support']!r}")
+    if s["start"] not in STARTS:
+        raise SceneError(where, "start", f"one of {', '.join(STARTS)}, got {s['start']!r}")
     if not 0 < s["object_share"] <= 1:
         raise SceneError(where, "object_share", f"a fraction in (0, 1], got {s['object_share']}")
     for key in ("smoothness", "binary", "sparsity", "energy"):

@@ -37,9 +37,9 @@ from ..scene.packing import pack_scene
 from ..scene.poses import placements, read_poses
 from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
-from ..scene.types import SceneError
+from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
-from .material import TexelMaterial, neighbour_pairs
+from .material import F0, TexelMaterial, neighbour_pairs
 from .rays import SUPPORT_ID, pixel_pools
 from .support import support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training
@@ -191,16 +191,21 @@ def _scene_parts(settings, copies, texels, cameras, images, masks):
     k = next(i for i, m in enumerate(masks) if m is not None)  # the photograph the segmentation ran on
     camera, photo, ids = cameras[k], images[k], masks[k]
     poses = {c.instance_id: c.transform for c in copies}
-    materials = {"object": first_guess(texels, poses, camera, photo, ids)}
+    start = first_guess if settings["start"] == "photograph" else _grey
+    materials = {"object": start(texels, poses, camera, photo, ids)}
     objects, support = list(copies), None
     if settings["support"] == "plane":
         worlds = [c.mesh.positions.astype(np.float64) @ c.transform[:3, :3].T + c.transform[:3, 3] for c in copies]
         quad = support_mesh(worlds, cameras)
         quad_texels = support_texels(quad, settings["support_resolution"])
-        materials["support"] = first_guess(quad_texels, {SUPPORT_ID: np.eye(4)}, camera, photo, ids)
+        materials["support"] = start(quad_texels, {SUPPORT_ID: np.eye(4)}, camera, photo, ids)
         objects.append(support_object(quad))
         support = (quad, quad_texels)
     return objects, materials, support
+
+
+def _grey(texels, *_) -> Atlas:
+    return Atlas.uniform(texels.shape, kd=0.5, ks=F0, ka=0.1)
 
 
 def _loop(training: Training, out: Path, digests, progress: bool) -> None:
