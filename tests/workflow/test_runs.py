@@ -88,7 +88,9 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
-    **dict.fromkeys(("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate", "edit"), 1),
+    **dict.fromkeys(
+        ("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate", "edit"), 1
+    ),
     **dict.fromkeys(("features", "render", "export"), 2),
     "all": 1,
 }

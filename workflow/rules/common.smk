@@ -790,7 +790,10 @@ def milo_settings(wildcards):
     )
 
 
-MATERIAL_RUNTIME = {"ci": 15, "default": 240}  # minutes a duplicates_material job may run
+MATERIAL_RUNTIME = {
+    "ci": 15,
+    "default": 240,
+}  # minutes a duplicates_material job may run
 
 
 def material_settings(wildcards):
