@@ -121,17 +121,8 @@ def run(
         )
     settings = resolve(preset, overrides)
     check_output(out_dir, "duplicates-material")
-    geometry_dir, cameras_path = Path(geometry_dir), Path(cameras_path)
-    mesh = read_mesh(geometry_dir / "mesh.ply")
-    texels = AtlasTexels.load(geometry_dir / "atlas.npz")
-    copies = placements(read_poses(poses_path), mesh, "object", where=poses_path)
-    if not copies:
-        raise SceneError(poses_path, "instances", "at least one registered copy (registered: true)")
-    cameras = read_cameras(cameras_path)
-    images = [read_view(cameras_path / "images", c) for c in cameras]
-    masks = read_masks(masks_path, cameras)
+    texels, copies, cameras, images, masks = _read_inputs(geometry_dir, poses_path, cameras_path, masks_path)
     registered = {c.instance_id for c in copies}
-    check_coverage(masks, registered, masks_path)
 
     objects, materials, support = _scene_parts(settings, copies, texels, cameras, images, masks)
     n = settings["sky_resolution"]
@@ -147,7 +138,8 @@ def run(
 
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(1)  # torch's OpenMP workers would spin beside PoCL's (milo/stage.py measured it)
-    median = float(max(np.median(np.concatenate(images).reshape(-1, 3) @ LUMINANCE), 1e-3))
+    pixels = np.concatenate([image.reshape(-1, 3) for image in images])
+    median = float(max(np.median(pixels @ LUMINANCE), 1e-3))
     training = Training(
         settings,
         TexelMaterial(materials, kg, pairs),
@@ -182,6 +174,22 @@ def run(
         write_snapshot(out / "snapshots" / "iter_000000.npz", training.material.set_maps("object"), 0, 0.0)
     _loop(training, out, digests, progress)
     return _finish(training, out, digests, preset, support, images, masks)
+
+
+def _read_inputs(geometry_dir, poses_path, cameras_path, masks_path):
+    """The shared mesh's atlas texels, the registered copies, the cameras, their images and masks,
+    checked (check_coverage) before any output is touched."""
+    geometry_dir, cameras_path = Path(geometry_dir), Path(cameras_path)
+    mesh = read_mesh(geometry_dir / "mesh.ply")
+    texels = AtlasTexels.load(geometry_dir / "atlas.npz")
+    copies = placements(read_poses(poses_path), mesh, "object", where=poses_path)
+    if not copies:
+        raise SceneError(poses_path, "instances", "at least one registered copy (registered: true)")
+    cameras = read_cameras(cameras_path)
+    images = [read_view(cameras_path / "images", c) for c in cameras]
+    masks = read_masks(masks_path, cameras)
+    check_coverage(masks, {c.instance_id for c in copies}, masks_path)
+    return texels, copies, cameras, images, masks
 
 
 def _scene_parts(settings, copies, texels, cameras, images, masks):
