@@ -168,6 +168,20 @@ def cmd_milo(args):
     )
 
 
+def _training_options(p, preset: str, presets: str) -> None:
+    """A training stage's --preset, --set, --resume and --device (milo, duplicates-material)."""
+    p.add_argument("--preset", default=preset, help=presets)
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
+    p.add_argument(
+        "--resume",
+        choices=["never", "always", "auto"],
+        default="never",
+        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
+        "mismatched one), auto (else start afresh), never",
+    )
+    p.add_argument("--device")
+
+
 def cmd_duplicates_material(args):
     from .duplicates_material import stage
 
@@ -426,16 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", required=True, help="COLMAP model directory or transforms.json")
     p.add_argument("--images", required=True, help="directory of the captured images, named as the cameras' images")
     p.add_argument("--out", required=True, help="directory to fill (weights.pt, maps.npz, log.csv, snapshots/, ...)")
-    p.add_argument("--preset", default="demo", help="paper, cpu or demo (docs/milo.md)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
-    p.add_argument(
-        "--resume",
-        choices=["never", "always", "auto"],
-        default="never",
-        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
-        "mismatched one), auto (else start afresh), never",
-    )
-    p.add_argument("--device")
+    _training_options(p, "demo", "paper, cpu or demo (docs/milo.md)")
     p.set_defaults(func=cmd_milo)
 
     p = stages.add_parser(
@@ -448,16 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", required=True, help="COLMAP model directory with images/")
     p.add_argument("--masks", required=True, help="the photograph's instance-id PNG, or a folder of <image stem>.png")
     p.add_argument("--out", required=True, help="directory to fill (maps.npz, support/, log.csv, snapshots/, ...)")
-    p.add_argument("--preset", default="ci", help="ci or default (docs/duplicates-material.md)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
-    p.add_argument(
-        "--resume",
-        choices=["never", "always", "auto"],
-        default="never",
-        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
-        "mismatched one), auto (else start afresh), never",
-    )
-    p.add_argument("--device")
+    _training_options(p, "ci", "ci or default (docs/duplicates-material.md)")
     p.set_defaults(func=cmd_duplicates_material)
 
     p = stages.add_parser("bake", help="recovered maps + mesh + cameras -> a scene directory")

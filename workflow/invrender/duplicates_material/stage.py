@@ -115,10 +115,7 @@ def run(
     device: str | None = None,
     progress: bool = True,
 ) -> dict:
-    if resume not in checkpoints.RESUME:
-        raise SceneError(
-            "duplicates-material --resume", "resume", f"one of {', '.join(checkpoints.RESUME)}, got {resume!r}"
-        )
+    checkpoints.check_resume(resume, "duplicates-material --resume")
     settings = resolve(preset, overrides)
     check_output(out_dir, "duplicates-material")
     texels, copies, cameras, images, masks = _read_inputs(geometry_dir, poses_path, cameras_path, masks_path)

@@ -29,7 +29,7 @@ from ..scene.atlas import AtlasTexels
 from ..scene.atomic import atomic_path, claim_dir
 from ..scene.cameras import read_cameras
 from ..scene.capture import read_view
-from ..scene.checkpoints import RESUME
+from ..scene.checkpoints import check_resume
 from ..scene.mesh_io import read_mesh
 from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
@@ -100,8 +100,7 @@ def run(
     device: str | None = None,
     progress: bool = True,
 ) -> dict:
-    if resume not in RESUME:
-        raise SceneError("milo --resume", "resume", f"one of {', '.join(RESUME)}, got {resume!r}")
+    check_resume(resume, "milo --resume")
     settings = resolve(preset, overrides)
     geometry_dir, out = Path(geometry_dir), claim_dir(out_dir, "milo")
     atlas = AtlasTexels.load(geometry_dir / "atlas.npz")

@@ -19,11 +19,17 @@ import numpy as np
 from .atomic import atomic_path
 from .types import SceneError
 
-__all__ = ["RESUME", "atlas_hash", "save", "checkpoints", "load", "latest", "resume"]
+__all__ = ["RESUME", "check_resume", "atlas_hash", "save", "checkpoints", "load", "latest", "resume"]
 
 log = logging.getLogger(__name__)
 RESUME = ("never", "always", "auto")
 _NAME = re.compile(r"^iter_(\d{6,})\.pt$")
+
+
+def check_resume(mode: str, where: str) -> None:
+    """`--resume mode` is one of RESUME, or a SceneError naming `where` (the command's flag)."""
+    if mode not in RESUME:
+        raise SceneError(where, "resume", f"one of {', '.join(RESUME)}, got {mode!r}")
 
 
 def atlas_hash(positions: np.ndarray, mask: np.ndarray) -> str:
