@@ -195,3 +195,29 @@ def test_too_few_object_pixels_stop_before_anything_is_written(captures, tmp_pat
         in message
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_without_a_support_only_object_pixels_train(captures, tmp_path):
+    """`support: none`: no quad, no support material, every ray from the copies' masks."""
+    _, inputs = captures[2]
+    settings = {**TRAINING, "iterations": 1, "rays": 256, "support": "none"}
+    summary = stage.run(**inputs, out_dir=tmp_path / "out", preset="ci", overrides=settings, progress=False)
+    assert summary["support"] is None and summary["pixels"]["support"] == 0
+    assert not (tmp_path / "out" / "support").exists()
+    with open(tmp_path / "out" / "log.csv", newline="") as handle:
+        (row,) = csv.DictReader(handle)
+    assert (int(row["rays_object"]), int(row["rays_support"])) == (256, 0)
+
+
+def test_poses_without_a_registered_copy_are_refused(captures, tmp_path, capsys):
+    _, inputs = captures[2]
+    doc = json.loads(inputs["poses_path"].read_text())
+    for entry in doc["instances"]:
+        entry["registered"] = False
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps(doc))
+    args = _args({**inputs, "poses_path": poses}, tmp_path / "out", inputs["masks_path"])
+    assert main(args) == 2
+    message = capsys.readouterr().err.strip().splitlines()[-1]
+    assert f"{poses}: instances: expected at least one registered copy (registered: true)" in message
+    assert not (tmp_path / "out").exists()
