@@ -30,7 +30,17 @@ def dry_run(tmp_path, scenes, *targets, check=True):
 # What a duplicates capture with cameras (a model, or a photograph's lens) builds: its one camera,
 # the segment checkpoint, the poses and shared mesh, the mesh unwrapped, the scene baked, and what
 # reads the scene. (duplicates_crop joins once the checkpoint has run.)
-DUPLICATES_CHAIN = ("cameras", "segment", "duplicates", "geometry", "bake_duplicates", "features", "render", "export")
+DUPLICATES_CHAIN = (
+    "cameras",
+    "segment",
+    "duplicates",
+    "geometry",
+    "duplicates_material",
+    "bake_duplicates",
+    "features",
+    "render",
+    "export",
+)
 
 
 def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
@@ -84,7 +94,7 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     assert "--backend provided --min-instances 3 --masks boxes/masks" in result.stdout
     assert "scene 'shelf' (duplicates, a capture of your own): builds results/shelf/cameras, " in result.stdout
     assert "scene 'tins' (duplicates, a capture of your own): builds nothing yet" in result.stdout
-    assert "the material and light stage (issue 14)" in result.stdout
+    assert "the evaluation of the recovered material and light (issue 14)" in result.stdout
     assert "scene 'living' (room, a capture of your own): builds results/living/cameras;" in result.stdout
     assert "(issue 16) build results/living/scene/" in result.stdout
     assert not (tmp_path / "results").exists()

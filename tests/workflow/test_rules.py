@@ -117,7 +117,7 @@ def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
     instances = read_json(workdir / "results/boxes/segmentation/instances.json")["instances"]
     assert len(instances) >= 3
     assert ran_jobs(result.stdout) == {
-        **dict.fromkeys(("cameras", "segment", "duplicates", "geometry", "bake_duplicates"), 1),
+        **dict.fromkeys(("cameras", "segment", "duplicates", "geometry", "duplicates_material", "bake_duplicates"), 1),
         "duplicates_crop": len(instances),
     }
     assert "ground_truth" not in result.stdout  # no job of the recovery reads the truth
@@ -137,9 +137,13 @@ def test_a_duplicates_scene_is_recovered_from_its_photograph(built):
     assert len(colmap_names) == len(summary["registered_by_colmap"]) >= 2
     assert read_json(workdir / "results/boxes/geometry/geometry.json")["mesh"]["faces"] > 0
     scene = load_scene(workdir / "results/boxes/scene")
-    assert scene.version == 2 and len(scene.objects) == len(placed)
-    assert len({id(obj.mesh) for obj in scene.objects}) == 1  # instances of one shared mesh
-    for obj, pose in zip(sorted(scene.objects, key=lambda o: o.instance_id), poses_of(poses, placed)):
+    copies = [obj for obj in scene.objects if obj.material == "object"]
+    # the copies and the support plane the material stage recovered (its own material set)
+    assert scene.version == 2 and len(copies) == len(placed) and len(scene.objects) == len(placed) + 1
+    assert sorted({obj.material for obj in scene.objects}) == ["object", "support"]
+    assert len({id(obj.mesh) for obj in copies}) == 1  # instances of one shared mesh
+    assert read_json(workdir / "results/boxes/material/training.json")["iterations"] == 3  # the test config's
+    for obj, pose in zip(sorted(copies, key=lambda o: o.instance_id), poses_of(poses, placed)):
         np.testing.assert_allclose(obj.transform, pose, atol=1e-5)
 
 

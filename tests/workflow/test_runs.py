@@ -91,8 +91,10 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
-    **dict.fromkeys(("gradients", "milo_train", "bake", "bake_duplicates", "evaluate", "evaluate_duplicates"), 1),
-    "edit": 1,
+    **dict.fromkeys(
+        ("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate"), 1
+    ),
+    **dict.fromkeys(("evaluate_duplicates", "edit"), 1),
     **dict.fromkeys(("features", "render", "export"), 2),
     "all": 1,
 }

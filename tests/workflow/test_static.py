@@ -20,18 +20,11 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 # The rules of the demo's DAG before the segment checkpoint has run (what --rulegraph and a dry
 # run show); duplicates_crop, one job per instance, joins once it has.
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
-RULES |= {"segment", "duplicates", "features", "render", "export", "evaluate", "evaluate_duplicates", "edit"}
+RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
+RULES |= {"evaluate_duplicates", "edit"}
 CHECKPOINT_RULES = {"duplicates_crop"}
-RAY_TRACING_RULES = {
-    "synthesize",
-    "features",
-    "render",
-    "gradients",
-    "milo_train",
-    "evaluate",
-    "evaluate_duplicates",
-    "edit",
-}
+RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
+RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -162,7 +155,7 @@ BAD_CONFIGS = {
         {"render": {"spp": 4}, "scene": {}},
         [
             "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
-            "milo, evaluate, edit, export"
+            "duplicates_material, milo, evaluate, edit, export"
         ],
     ),
     "typo in a scene": (

@@ -104,6 +104,7 @@ FULL_RUN_JOBS = {
     "gradients": 1,
     "milo_train": 1,
     "bake": 1,
+    "duplicates_material": 1,
     "bake_duplicates": 1,
     "features": 2,
     "render": 2,

@@ -168,13 +168,43 @@ def cmd_milo(args):
     )
 
 
+def _training_options(p, preset: str, presets: str) -> None:
+    """A training stage's --preset, --set, --resume and --device (milo, duplicates-material)."""
+    p.add_argument("--preset", default=preset, help=presets)
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
+    p.add_argument(
+        "--resume",
+        choices=["never", "always", "auto"],
+        default="never",
+        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
+        "mismatched one), auto (else start afresh), never",
+    )
+    p.add_argument("--device")
+
+
+def cmd_duplicates_material(args):
+    from .duplicates_material import stage
+
+    stage.run(
+        args.geometry,
+        args.poses,
+        args.cameras,
+        args.masks,
+        args.out,
+        preset=args.preset,
+        overrides=_key_values(args.set),
+        resume=args.resume,
+        device=args.device,
+    )
+
+
 def cmd_bake(args):
     from .bake import duplicates, stage
 
     if args.poses:
-        if not args.masks:
-            raise SystemExit("bake --poses: --masks (the instance id PNG) is required")
-        duplicates.run(args.geometry, args.poses, args.cameras, args.masks, args.out)
+        if not args.masks and not args.material:
+            raise SystemExit("bake --poses: --masks (the instance id PNG) or --material is required")
+        duplicates.run(args.geometry, args.poses, args.cameras, args.masks, args.out, material_dir=args.material)
     else:
         stage.run(args.maps, args.geometry, args.cameras, args.out, training_path=args.training)
 
@@ -421,17 +451,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", required=True, help="COLMAP model directory or transforms.json")
     p.add_argument("--images", required=True, help="directory of the captured images, named as the cameras' images")
     p.add_argument("--out", required=True, help="directory to fill (weights.pt, maps.npz, log.csv, snapshots/, ...)")
-    p.add_argument("--preset", default="demo", help="paper, cpu or demo (docs/milo.md)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
-    p.add_argument(
-        "--resume",
-        choices=["never", "always", "auto"],
-        default="never",
-        help="continue from the newest checkpoint in OUT/checkpoints: always (refuse a missing, corrupt or "
-        "mismatched one), auto (else start afresh), never",
-    )
-    p.add_argument("--device")
+    _training_options(p, "demo", "paper, cpu or demo (docs/milo.md)")
     p.set_defaults(func=cmd_milo)
+
+    p = stages.add_parser(
+        "duplicates-material",
+        help="the copies' shared material, the support's and the sky from the photograph(s) -> maps.npz, "
+        "support/, log.csv (rule duplicates_material)",
+    )
+    p.add_argument("--geometry", required=True, help="geometry stage output (the shared mesh.ply, atlas.npz)")
+    p.add_argument("--poses", required=True, help="poses.json of the duplicates stage")
+    p.add_argument("--cameras", required=True, help="COLMAP model directory with images/")
+    p.add_argument("--masks", required=True, help="the photograph's instance-id PNG, or a folder of <image stem>.png")
+    p.add_argument("--out", required=True, help="directory to fill (maps.npz, support/, log.csv, snapshots/, ...)")
+    _training_options(p, "ci", "ci or default (docs/duplicates-material.md)")
+    p.set_defaults(func=cmd_duplicates_material)
 
     p = stages.add_parser("bake", help="recovered maps + mesh + cameras -> a scene directory")
     source = p.add_mutually_exclusive_group(required=True)
@@ -441,6 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", required=True, help="COLMAP model directory (with images/ for --poses)")
     p.add_argument("--training", help="training.json of the milo stage (recorded in scene.json's metadata)")
     p.add_argument("--masks", help="with --poses: the instance id PNG (which copy each pixel shows)")
+    p.add_argument(
+        "--material", help="with --poses: the duplicates-material stage's folder (recovered atlas, sky, support)"
+    )
     p.add_argument("--out", required=True, help="scene directory to write")
     p.set_defaults(func=cmd_bake)
 

@@ -33,13 +33,15 @@ rule bake:
 
 rule bake_duplicates:
     """A duplicates scene directory: the shared mesh (geometry stage) instanced at every recovered
-    pose (duplicates stage), seen by the photograph's camera, with a first-guess atlas (the
-    photograph's colours, until the material stage recovers albedo and light)."""
+    pose (duplicates stage), seen by the photograph's camera, with the shared material, the sky
+    and the support surface the material stage recovered (duplicates_material)."""
     input:
         geometry="results/{scene}/geometry",
         duplicates="results/{scene}/duplicates",
         cameras="results/{scene}/cameras",
         segmentation=segmentation_dir,
+        material="results/{scene}/material/maps.npz",
+        training="results/{scene}/material/training.json",
     output:
         report(
             directory("results/{scene}/scene"),
@@ -64,4 +66,5 @@ rule bake_duplicates:
         masks=instance_masks,
     shell:
         "invrender --log {log} bake --poses {input.duplicates}/poses.json --masks {params.masks:q}"
+        " --material results/{wildcards.scene}/material"
         " --geometry {input.geometry} --cameras {input.cameras} --out {output}"

@@ -790,6 +790,28 @@ def milo_settings(wildcards):
     )
 
 
+MATERIAL_RUNTIME = {
+    "ci": 15,
+    "default": 240,
+}  # minutes a duplicates_material job may run
+
+
+def material_settings(wildcards):
+    """`--set key=value` for each override: config `duplicates_material.overrides`, then the
+    scene's own `duplicates_material` mapping."""
+    scene = SCENES[wildcards.scene]
+    return set_options(
+        {
+            **config["duplicates_material"]["overrides"],
+            **scene.get("duplicates_material", {}),
+        }
+    )
+
+
+def material_runtime(wildcards):
+    return MATERIAL_RUNTIME[config["duplicates_material"]["preset"]]
+
+
 def milo_runtime(wildcards):
     return MILO_RUNTIME[config["milo"]["preset"]]
 

@@ -9,9 +9,8 @@ ablation of Fig. 12: two plain MLPs, no template, no category or texture loss.
 
 from __future__ import annotations
 
-import hashlib
-import json
-
+from ..scene.settings import resolve_preset
+from ..scene.settings import settings_hash as _settings_hash
 from ..scene.types import SceneError
 
 _COMMON = {
@@ -96,35 +95,10 @@ _NOT_HASHED = {"checkpoint_every", "snapshot_every"}
 
 
 def resolve(preset: str, overrides: dict | None = None, where: str = "milo") -> dict:
-    """The preset's settings with `overrides` on top; an unknown preset or key, or a value of
-    another type than the preset's, is refused naming it."""
-    if preset not in PRESETS:
-        raise SceneError(where, "preset", f"one of {', '.join(PRESETS)}, got {preset!r}")
-    settings = dict(PRESETS[preset])
-    for key, value in (overrides or {}).items():
-        if key not in settings:
-            raise SceneError(where, f"overrides.{key}", f"one of the settings {', '.join(sorted(settings))}")
-        settings[key] = _typed(settings[key], value, where, key)
+    """The preset's settings with `overrides` on top (scene/settings.py), checked."""
+    settings = resolve_preset(PRESETS, preset, overrides, where)
     _check(settings, where)
     return settings
-
-
-def _typed(default, value, where: str, key: str):
-    """`value` if it has the preset value's type (an int where a float is wanted is a float)."""
-    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, float):
-        ok, value = is_number, float(value) if is_number else value
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, type(default))
-    if not ok:
-        raise SceneError(
-            where, f"overrides.{key}", f"a {type(default).__name__} like the preset's {default!r}, got {value!r}"
-        )
-    return value
 
 
 def _check(s: dict, where: str) -> None:
@@ -154,5 +128,4 @@ def _check(s: dict, where: str) -> None:
 
 def settings_hash(settings: dict) -> str:
     """What a checkpoint must agree with to resume: every setting that changes the computation."""
-    kept = {key: value for key, value in settings.items() if key not in _NOT_HASHED}
-    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]
+    return _settings_hash(settings, _NOT_HASHED)

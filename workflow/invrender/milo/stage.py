@@ -29,18 +29,19 @@ from ..scene.atlas import AtlasTexels
 from ..scene.atomic import atomic_path, claim_dir
 from ..scene.cameras import read_cameras
 from ..scene.capture import read_view
+from ..scene.checkpoints import check_resume
 from ..scene.mesh_io import read_mesh
-from ..scene.snapshots import SNAPSHOT_PATTERN, list_snapshots, write_snapshot
+from ..scene.snapshots import drop_snapshots_after, write_snapshot
+from ..scene.training_log import TrainingLog
 from ..scene.types import Camera, Maps, Scene, SceneError
 from . import checkpoint
 from .config import resolve, settings_hash
 from .importance import emitting_start, observed_radiance
 from .network import MiloNet
 from .texels import Texels
-from .train import Training, TrainingLog, Views
+from .train import LOG_COLUMNS, Training, Views
 
 log = logging.getLogger(__name__)
-RESUME = ("never", "always", "auto")
 VISIBILITY_STRIDE = 4  # every 4th pixel in x and y decides whether a camera sees the mesh
 
 
@@ -99,8 +100,7 @@ def run(
     device: str | None = None,
     progress: bool = True,
 ) -> dict:
-    if resume not in RESUME:
-        raise SceneError("milo --resume", "resume", f"one of {', '.join(RESUME)}, got {resume!r}")
+    check_resume(resume, "milo --resume")
     settings = resolve(preset, overrides)
     geometry_dir, out = Path(geometry_dir), claim_dir(out_dir, "milo")
     atlas = AtlasTexels.load(geometry_dir / "atlas.npz")
@@ -134,7 +134,9 @@ def run(
         texels.gather(radiance),
     )
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
-    _resume(training, out / "checkpoints", resume, settings, digests)
+    state = checkpoint.resume(out / "checkpoints", resume, settings, digests)
+    if state is not None:
+        training.restore(state)
     log.info(
         "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views; from %d",
         preset,
@@ -146,41 +148,14 @@ def run(
         len(train_cams),
         training.iteration,
     )
-    _drop_snapshots_after(out / "snapshots", training.iteration)
+    drop_snapshots_after(out / "snapshots", training.iteration)
     _loop(training, out, digests, progress)
     return _finish(training, out, digests, preset, emission, sky)
 
 
-def _resume(training: Training, directory: Path, resume: str, settings: dict, digests) -> None:
-    path = checkpoint.latest(directory)
-    if resume == "never" or (path is None and resume == "auto"):
-        for stale in checkpoint.checkpoints(directory):
-            stale.unlink()
-        return
-    if path is None:
-        raise SceneError(directory, "checkpoint", "a checkpoint to resume from (--resume always); there is none")
-    try:
-        state = checkpoint.load(path, settings, *digests)
-    except SceneError as error:
-        if resume == "always":
-            raise
-        log.warning("milo: not resuming: %s; training from the start", error)
-        return _resume(training, directory, "never", settings, digests)
-    training.restore(state)
-    log.info("milo: resumed from %s (iteration %d)", path, training.iteration)
-
-
-def _drop_snapshots_after(directory: Path, iteration: int) -> None:
-    """A fresh run (iteration 0) or a resumed one owns the snapshots after its start: an earlier,
-    longer run's would otherwise reach evaluate's accuracy-against-time curve."""
-    for path in list_snapshots(directory) if directory.is_dir() else []:
-        if int(SNAPSHOT_PATTERN.match(path.name).group(1)) > iteration:
-            path.unlink()
-
-
 def _loop(training: Training, out: Path, digests, progress: bool) -> None:
     s = training.settings
-    log_csv = TrainingLog(out / "log.csv", resume_from=training.iteration)
+    log_csv = TrainingLog(out / "log.csv", LOG_COLUMNS, resume_from=training.iteration)
     bar = tqdm(total=s["iterations"], initial=training.iteration, desc="milo", unit="it", disable=not progress)
     while training.iteration < s["iterations"]:
         row = training.step()

@@ -16,16 +16,14 @@ run started at 0 or resumed at k.
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..render.adjoint import GRAD_CHANNELS, backward, backward_seed
-from ..render.batches import ray_batch
+from ..render.batches import iteration_seed, ray_batch  # noqa: F401 (iteration_seed: milo's, kept importable here)
 from ..render.renderer import Renderer
 from ..scene.types import ATLAS_MAPS, Camera, Maps
 from .losses import image_loss, regularisers
@@ -51,13 +49,6 @@ LOG_COLUMNS = (
     "lr_mlp",
     "lr_template",
 )
-
-
-def iteration_seed(seed: int, iteration: int) -> int:
-    """The path samples' seed of one iteration: 63 bits, so backward_seed's flipped top bit is
-    another seed."""
-    state = np.random.SeedSequence([int(seed), int(iteration)]).generate_state(2, np.uint32)
-    return ((int(state[0]) << 32) | int(state[1])) & ((1 << 63) - 1)
 
 
 @dataclass
@@ -237,27 +228,3 @@ class Training:
             schedule.load_state_dict(saved)
         torch.set_rng_state(state["torch_rng"])
         self.iteration, self.wall_time = int(state["iteration"]), float(state["wall_time"])
-
-
-class TrainingLog:
-    """log.csv, one row per iteration, appended as the run goes; a resumed run first drops the
-    rows after its checkpoint (the killed run's last iterations are computed again)."""
-
-    def __init__(self, path, resume_from: int = 0):
-        self.path = Path(path)
-        kept = []
-        if resume_from and self.path.exists():
-            with open(self.path, newline="") as handle:
-                kept = [row for row in csv.DictReader(handle) if int(row["iteration"]) <= resume_from]
-        with open(self.path, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, LOG_COLUMNS)
-            writer.writeheader()
-            writer.writerows(kept)
-
-    def append(self, row: dict) -> None:
-        with open(self.path, "a", newline="") as handle:
-            csv.DictWriter(handle, LOG_COLUMNS).writerow({key: _cell(row[key]) for key in LOG_COLUMNS})
-
-
-def _cell(value):
-    return f"{value:.6g}" if isinstance(value, float) else value

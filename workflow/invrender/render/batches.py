@@ -26,3 +26,22 @@ def ray_batch(cameras: list[Camera], size: int, seed: int, iteration: int) -> np
     local = ids - offsets[camera]
     widths = np.array([c.width for c in cameras], np.int64)[camera]
     return np.stack([camera, local % widths, local // widths, ids], -1).astype(np.int32)
+
+
+def iteration_seed(seed: int, iteration: int) -> int:
+    """The path samples' seed of one iteration: 63 bits, so backward_seed's flipped top bit is
+    another seed."""
+    state = np.random.SeedSequence([int(seed), int(iteration)]).generate_state(2, np.uint32)
+    return ((int(state[0]) << 32) | int(state[1])) & ((1 << 63) - 1)
+
+
+def pool_batch(pools: list[np.ndarray], sizes: list[int], seed: int, iteration: int) -> np.ndarray:
+    """Masked ray batches: from each pool of int4 requests (the pixels a loss may see, e.g. an
+    object's mask and its support's), `sizes[k]` rows drawn without replacement (at most the
+    pool's size), keyed by (seed, iteration) like ray_batch; the pools' rows one after another."""
+    rng = np.random.default_rng([int(seed), int(iteration)])
+    picked = []
+    for pool, size in zip(pools, sizes):
+        size = min(int(size), len(pool))
+        picked.append(pool[np.sort(rng.choice(len(pool), size=size, replace=False))] if size else pool[:0])
+    return np.concatenate(picked).astype(np.int32)

@@ -17,7 +17,15 @@ import numpy as np
 from .atomic import atomic_path
 from .types import ATLAS_MAPS, MAP_CHANNELS, Maps, SceneError
 
-__all__ = ["SNAPSHOT_PATTERN", "SNAPSHOT_KEYS", "list_snapshots", "check_snapshot", "load_snapshot", "write_snapshot"]
+__all__ = [
+    "SNAPSHOT_PATTERN",
+    "SNAPSHOT_KEYS",
+    "list_snapshots",
+    "drop_snapshots_after",
+    "check_snapshot",
+    "load_snapshot",
+    "write_snapshot",
+]
 
 SNAPSHOT_PATTERN = re.compile(r"^iter_(\d{6,})\.npz$")
 SNAPSHOT_KEYS = (*ATLAS_MAPS, "kg", "iteration", "wall_time")
@@ -31,6 +39,15 @@ def list_snapshots(directory) -> list[Path]:
         raise SceneError(directory, "snapshots", "a directory of iter_XXXXXX.npz files")
     found = [p for p in directory.iterdir() if SNAPSHOT_PATTERN.match(p.name)]
     return sorted(found, key=lambda p: int(SNAPSHOT_PATTERN.match(p.name).group(1)))
+
+
+def drop_snapshots_after(directory, iteration: int) -> None:
+    """A fresh run (iteration 0) or a resumed one owns the snapshots after its start: an earlier,
+    longer run's would otherwise reach evaluate's accuracy-against-time curve."""
+    directory = Path(directory)
+    for path in list_snapshots(directory) if directory.is_dir() else []:
+        if int(SNAPSHOT_PATTERN.match(path.name).group(1)) > iteration:
+            path.unlink()
 
 
 def _expected_shape(name: str, atlas_shape) -> tuple | None:
