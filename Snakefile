@@ -26,6 +26,7 @@ include: "workflow/rules/render.smk"
 include: "workflow/rules/export.smk"
 include: "workflow/rules/evaluate.smk"
 include: "workflow/rules/edit.smk"
+include: "workflow/rules/accuracy.smk"
 
 
 localrules:

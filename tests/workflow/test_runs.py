@@ -89,16 +89,18 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
     **dict.fromkeys(("gradients", "milo_train", "bake", "bake_duplicates", "evaluate", "edit"), 1),
-    **dict.fromkeys(("features", "render", "export"), 2),
+    **dict.fromkeys(("features", "render", "export", "accuracy", "summary"), 2),
     "all": 1,
 }
 
 
 def test_changing_render_spp_reruns_render_only(complete, tmp_path):
+    """... and the accuracy sweep, whose highlighted default is the configured spp, and the
+    summary that times them."""
     override = tmp_path / "spp.yaml"
     override.write_text(yaml.safe_dump({"render": {"spp": 8}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    assert job_counts(result.stdout) == {"render": 2, "all": 1}
+    assert job_counts(result.stdout) == {"render": 2, "accuracy": 2, "summary": 2, "all": 1}
 
 
 def test_unknown_device_keeps_the_built_capture(complete):
@@ -210,3 +212,60 @@ def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
     assert set(after) == {f"results/{s}/{name}" for s, outputs in RULE_OF_OUTPUT.items() for name in outputs}
     assert _leftovers(tmp_path) == []
     assert job_counts(snakemake(tmp_path, "-n").stdout) == {}
+
+
+# What the report must show of each scene of the toy config: the input, recovered maps, renders,
+# edits, the metrics beside the papers', the accuracy plots and tables, time and memory per rule.
+REPORT_FIGURES = {
+    "room": {
+        "view_000.png",  # the capture and the renders
+        "maps_kd.png",  # recovered maps against the truth
+        "accuracy_forward.png",
+        "accuracy_gradients.png",
+        "accuracy_recovery.png",
+        "accuracy.html",
+        "metrics.html",
+        "runtime.html",
+        "runtime.png",
+    },
+    "boxes": {
+        "overlay.png",
+        "outlines_view_000.png",
+        "accuracy_forward.png",
+        "accuracy.html",
+        "metrics.html",
+        "runtime.html",
+        "runtime.png",
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def report_html(complete):
+    report = complete / "report.html"
+    if not report.exists():
+        snakemake(complete, "--report", report)
+    return report
+
+
+def test_report_in_a_browser_loads_every_image_and_table(report_html):
+    from report_browser import report_problems
+
+    assert report_problems(report_html, REPORT_FIGURES) == []
+
+
+def test_report_check_fails_without_a_figure(report_html, tmp_path):
+    """The same check on copies of the report: one figure dropped, one image's bytes broken."""
+    from report_browser import edit_results, report_problems
+
+    def drop(results):
+        del results[next(p for p in results if p.endswith("room/accuracy/accuracy_forward.png"))]
+
+    def corrupt(results):
+        entry = next(r for p, r in results.items() if p.endswith("boxes/accuracy/accuracy_forward.png"))
+        entry["data_uri"] = entry["data_uri"][:60] + "AAAA" + entry["data_uri"][-60:]
+
+    problems = report_problems(edit_results(report_html, tmp_path / "dropped.html", drop), REPORT_FIGURES)
+    assert problems == ["missing from the report: results/room/.../accuracy_forward.png"]
+    problems = report_problems(edit_results(report_html, tmp_path / "corrupt.html", corrupt), REPORT_FIGURES)
+    assert len(problems) == 1 and problems[0].startswith("image does not load:") and "boxes" in problems[0]

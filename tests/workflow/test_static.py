@@ -21,8 +21,9 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 # run show); duplicates_crop, one job per instance, joins once it has.
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "features", "render", "export", "evaluate", "evaluate_duplicates", "edit"}
+RULES |= {"accuracy", "summary"}
 CHECKPOINT_RULES = {"duplicates_crop"}
-RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit"}
+RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "evaluate", "edit", "accuracy"}
 
 
 def test_lint_is_clean(tmp_path):
