@@ -557,6 +557,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--images", help="the captured images: the gradient sweep's loss (none: no gradient sweep)")
     p.add_argument("--milo", help="a MILO training directory (log.csv, training.json): the recovery rows")
     p.add_argument("--metrics", help="evaluate's metrics.json: its scored snapshots are the recovery's errors")
+    p.add_argument(
+        "--run", action="append", metavar="SOURCE=DIR", help="another training run (log.csv, training.json), repeatable"
+    )
     p.add_argument("--budget", default="quick", help="quick (CI, seconds to a minute) or full (the README's figures)")
     p.add_argument("--default-spp", type=int, default=256, help="the configured render.spp (highlighted)")
     p.add_argument("--gradient-spp", type=int, default=16, help="the configured gradients.spp (highlighted)")

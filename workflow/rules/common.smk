@@ -867,7 +867,8 @@ def accuracy_runtime(wildcards):
 
 def summary_inputs(wildcards):
     """Everything the scene builds (the summary reads their benchmark records and metrics)."""
-    return [t for t in scene_targets(wildcards.scene) if not t.endswith("/summary")]
+    summary = f"results/{wildcards.scene}/summary"
+    return [t for t in scene_targets(wildcards.scene) if t != summary]
 
 
 # ---------------------------------------------------------------------------- resources

@@ -17,7 +17,7 @@ PANELS = {
     ),
     "gradients": (
         "accuracy_gradients.png",
-        [("grad_rel_error", "gradient relative error (mean over maps)")],
+        [("grad_rel_error", "gradient relative error (median over maps)")],
         "wall seconds per backward pass",
     ),
     "recovery": (
