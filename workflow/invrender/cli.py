@@ -288,9 +288,9 @@ def cmd_accuracy(args):
 
 
 def cmd_summary(args):
-    from .summary import stage
+    from .accuracy import summary
 
-    stage.run(args.results, args.out)
+    summary.run(args.results, args.out)
 
 
 def cmd_bench(args):

@@ -4,7 +4,7 @@ The reference is the configured features with paths of ``reference_bounces`` at
 ``reference_spp``, rendered as two independent halves; every other image is compared with it.
 A shorter path limit or an effect switched off changes the image itself, and so its error
 stops falling with spp at a floor: the bias, which ``bias_rmse`` estimates by removing both
-images' noise from their squared difference (``harness.agreement``'s pixel excess).
+images' noise from their squared difference (``render.measure.agreement``'s pixel excess).
 """
 
 from __future__ import annotations
@@ -15,11 +15,10 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..bench.harness import clock, quiet_pyopencl
-from ..bench.render import COMPILED_IN_OFF, agreement
 from ..render.analysis import preview_camera
 from ..render.device import choose_device, describe
-from ..render.features import Features
+from ..render.features import COMPILED_IN_OFF, Features
+from ..render.measure import agreement, clock, quiet_pyopencl
 from ..render.renderer import Renderer
 from ..render.scene_buffers import HostScene
 from ..render.tuning import choose_strategy_weights
@@ -63,7 +62,7 @@ class Variant:
 
 def variants(features: Features, budget, scene=None, device=None) -> list[Variant]:
     """The default, each bounce limit below the reference's, each effect `features` has switched
-    off (bench render's COMPILED_IN_OFF: the same switches its effects table measures), the other
+    off (render.features.COMPILED_IN_OFF: the same switches its effects table measures), the other
     estimator (NEE against MILO's mixture, its weights from its own pilot) and each lower
     resolution. The default comes first."""
     limited = features.max_bounces < budget.reference_bounces

@@ -12,11 +12,11 @@ import math
 
 import numpy as np
 
-from ..bench.harness import clock
 from ..render.adjoint import backward
 from ..render.batches import ray_batch
 from ..render.device import choose_device, describe
 from ..render.features import Features
+from ..render.measure import clock
 from ..render.renderer import Renderer
 from ..render.scene_buffers import HostScene
 from ..scene.capture import pixel_targets

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ..bench.harness import write_csv
 from ..render.features import Features
+from ..render.measure import write_csv
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.format import load_scene
 from ..scene.types import SceneError, require_positive

@@ -1,4 +1,4 @@
-"""The `summary` stage (rule summary): a scene's numbers for the Snakemake report.
+"""The summary (`invrender summary`, rule summary): a scene's numbers for the Snakemake report.
 
     out_dir/runtime.html    each rule's wall time, CPU time and peak memory, from the
                             `benchmark:` records results/{scene}/benchmarks/**/*.tsv
@@ -174,7 +174,7 @@ def _cell(value) -> str:
 
 
 def runtime_figure(path: Path, rows: list[dict]) -> None:
-    from ..accuracy.figures import pyplot
+    from .figures import pyplot
     from ..scene.atomic import atomic_path
 
     plt = pyplot()
