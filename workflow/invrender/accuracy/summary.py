@@ -174,8 +174,8 @@ def _cell(value) -> str:
 
 
 def runtime_figure(path: Path, rows: list[dict]) -> None:
-    from .figures import pyplot
     from ..scene.atomic import atomic_path
+    from .figures import pyplot
 
     plt = pyplot()
     names = [r["rule"] for r in rows] or ["(no records)"]
