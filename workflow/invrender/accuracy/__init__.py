@@ -6,6 +6,7 @@ MILO's mixture, resolution), gradients (``gradients.py``: spp and bounces agains
 reference gradient) and recovery (``recovery.py``: the training logs' metrics against wall time).
 ``front.py`` finds the Pareto front, the knee and the bias floors; ``figures.py`` draws them;
 ``stage.py`` writes accuracy_vs_time.csv, accuracy.json, the report's tables and the plots.
-``summary.py`` is the report's other tables (rule summary): each rule's time and memory from
-its benchmark record, and the metrics beside the papers'. ``budgets.py`` holds the two sizes, `quick` (CI) and `full` (the README's figures).
+``summary.py`` writes the report's other tables (rule summary): each rule's time and memory from
+its benchmark record, and the metrics beside the papers'. ``budgets.py`` holds the two sizes,
+`quick` (CI) and `full` (the README's figures).
 """
