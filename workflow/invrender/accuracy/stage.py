@@ -225,7 +225,7 @@ def _headline(document) -> str:
     if document["rate"]:
         parts.append(f"RMSE slope {document['rate']['slope']:.2f} against spp")
     for name, knee in document["knees"].items():
-        parts.append(f"{name} knee {knee['row']['label']} at {knee['row'].get('spp', knee['row'].get('iteration'))}")
+        parts.append(f"{name} knee: {_describe(knee['row'])}")
     parts += [f"floor: {f['label']}" for f in document["floors"]]
     return "; ".join(parts)
 
@@ -243,7 +243,7 @@ KNEE_WHAT = {
 
 def _describe(row) -> str:
     if row["family"] == "recovery":
-        return f"{row['label']}, iteration {row['iteration']}"
+        return f"{row['label']} run, iteration {row['iteration']} ({row['error_name']})"
     return f"{row['label']}, {row['spp']} spp"
 
 
