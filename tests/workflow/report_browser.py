@@ -69,6 +69,8 @@ def report_problems(report: Path, expected: dict[str, set[str]]) -> list[str]:
         results = driver.execute_script("return results;")
         images = {path: r for path, r in results.items() if r["mime_type"].startswith("image/")}
         pages = {path: r for path, r in results.items() if r["mime_type"] == "text/html"}
+        if not images or not pages:
+            problems.append(f"{len(images)} images and {len(pages)} HTML results: expected some of both")
         widths = driver.execute_async_script(_IMAGE_WIDTHS, [r["data_uri"] for r in images.values()])
         problems += [f"image does not load: {path}" for path, width in zip(images, widths) if not width]
         tables = driver.execute_async_script(_TABLE_ROWS, [r["data_uri"] for r in pages.values()])
@@ -90,7 +92,8 @@ def edit_results(report: Path, out: Path, edit) -> Path:
     import json
 
     text = Path(report).read_text()
-    start = text.index("var results = ") + len("var results = ")
+    block = text.index('<script id="results">')  # the report's own; its libraries have a `var results` too
+    start = text.index("var results = ", block) + len("var results = ")
     end = text.index(";\n", start)
     results = json.loads(text[start:end])
     edit(results)
