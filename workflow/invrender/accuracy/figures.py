@@ -60,10 +60,15 @@ def plot_family(out_dir, family_name: str, rows: list[dict], knee: dict | None, 
 
 
 def _panel(ax, rows, key, label, xlabel, knee, floors):
+    import matplotlib
+
     points = [r for r in rows if r.get(key) is not None and r[key] > 0]
-    for curve_label in dict.fromkeys(r["label"] for r in points):
+    colours = matplotlib.colormaps["tab20"].colors  # more curves than the default cycle's ten
+    for k, curve_label in enumerate(dict.fromkeys(r["label"] for r in points)):
         curve = sorted((r for r in points if r["label"] == curve_label), key=lambda r: r["time_s"])
-        ax.loglog([r["time_s"] for r in curve], [r[key] for r in curve], "o-", ms=3, lw=1, alpha=0.8, label=curve_label)
+        colour = colours[(2 * k) % 20 + (k // 10) % 2]  # the dark shades first, then the light ones
+        times, errors = [r["time_s"] for r in curve], [r[key] for r in curve]
+        ax.loglog(times, errors, "o-", ms=3, lw=1, alpha=0.8, color=colour, label=curve_label)
     front = pareto(points, key)
     ax.step([r["time_s"] for r in front], [r[key] for r in front], "k--", where="post", lw=1.2, label="Pareto front")
     for r in (r for r in points if r.get("default")):
