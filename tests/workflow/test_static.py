@@ -154,7 +154,7 @@ BAD_CONFIGS = {
         {"render": {"spp": 4}, "scene": {}},
         [
             "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
-            "milo, evaluate, edit, export"
+            "milo, evaluate, accuracy, edit, export"
         ],
     ),
     "typo in a scene": (
