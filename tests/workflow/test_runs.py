@@ -33,6 +33,8 @@ _SHARED = {
     "features.json": "features",
     "renders": "render",
     "export": "export",
+    "accuracy": "accuracy",
+    "summary": "summary",
 }
 # Each scene's outputs and the rule that writes each: the room (multiview) is recovered by MILO,
 # the boxes (duplicates) from their one photograph.
