@@ -27,6 +27,7 @@ include: "workflow/rules/render.smk"
 include: "workflow/rules/export.smk"
 include: "workflow/rules/evaluate.smk"
 include: "workflow/rules/edit.smk"
+include: "workflow/rules/accuracy.smk"
 
 
 # Trivial steps run where snakemake runs (on a cluster: the login node), not through the queue:

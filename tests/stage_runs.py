@@ -28,6 +28,8 @@ STAGES = [
     "edit",
     "evaluate",
     "segment",
+    "accuracy",
+    "summary",
 ]
 
 
@@ -43,6 +45,9 @@ def build_inputs(root: Path) -> Path:
     )
     assert main(args("geometry", root, root / "geometry")) == 0
     assert main(args("export", root, root / "export")) == 0
+    assert (
+        main(["features", str(root / "capture" / "ground_truth" / "scene"), "--out", str(root / "features.json")]) == 0
+    )
     write_room(root / "objroom", lambda path, radiance: None)
     truth = load_scene(root / "capture" / "ground_truth" / "scene")  # evaluate: the truth as its own recovery
     rasterize_atlas(truth.mesh, *truth.maps.atlas_shape).save(root / "truth_atlas.npz")
@@ -80,5 +85,8 @@ def args(stage: str, root: Path, out: Path) -> list[str]:
         "evaluate": ["--scene", scene, "--truth", scene, "--atlas", root / "truth_atlas.npz", "--images"]
         + [capture / "images", "--holdout", "view_000.exr", "--spp", "1"],
         "segment": [capture / "images" / "view_000.exr", "--backend", "provided", "--masks", root / "ids.png"],
+        # the quick sweep, forward only (no --images): the smallest run that draws a plot
+        "accuracy": ["--scene", scene, "--features", root / "features.json", "--default-spp", "4"],
+        "summary": ["--results", capture],
     }[stage]
     return [stage, *map(str, tail), "--out", str(out)]

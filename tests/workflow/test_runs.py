@@ -36,6 +36,8 @@ _SHARED = {
     "features.json": "features",
     "renders": "render",
     "export": "export",
+    "accuracy": "accuracy",
+    "summary": "summary",
 }
 # Each scene's outputs and the rule that writes each: the room (multiview) is recovered by MILO,
 # the boxes (duplicates) from their one photograph.
@@ -95,16 +97,18 @@ RERUN_AFTER_GEOMETRY = {
         ("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate"), 1
     ),
     **dict.fromkeys(("evaluate_duplicates", "edit"), 1),
-    **dict.fromkeys(("features", "render", "export"), 2),
+    **dict.fromkeys(("features", "render", "export", "accuracy", "summary"), 2),
     "all": 1,
 }
 
 
 def test_changing_render_spp_reruns_render_only(complete, tmp_path):
+    """... and the accuracy sweep, whose highlighted default is the configured spp, and the
+    summary that times them."""
     override = tmp_path / "spp.yaml"
     override.write_text(yaml.safe_dump({"render": {"spp": 8}}))
     result = snakemake(complete, "-n", config=[TEST_CONFIG, override])
-    assert job_counts(result.stdout) == {"render": 2, "all": 1}
+    assert job_counts(result.stdout) == {"render": 2, "accuracy": 2, "summary": 2, "all": 1}
 
 
 def test_unknown_device_keeps_the_built_capture(complete):
@@ -223,3 +227,60 @@ def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
     assert set(after) == {f"results/{s}/{name}" for s, outputs in outputs_of.items() for name in outputs}
     assert _leftovers(tmp_path) == []
     assert job_counts(snakemake(tmp_path, "-n", config=config).stdout) == {}
+
+
+# What the report must show of each scene of the toy config: the input, recovered maps, renders,
+# edits, the metrics beside the papers', the accuracy plots and tables, time and memory per rule.
+REPORT_FIGURES = {
+    "room": {
+        "view_000.png",  # the capture and the renders
+        "maps_kd.png",  # recovered maps against the truth
+        "accuracy_forward.png",
+        "accuracy_gradients.png",
+        "accuracy_recovery.png",
+        "accuracy.html",
+        "metrics.html",
+        "runtime.html",
+        "runtime.png",
+    },
+    "boxes": {
+        "overlay.png",
+        "outlines_view_000.png",
+        "accuracy_forward.png",
+        "accuracy.html",
+        "metrics.html",
+        "runtime.html",
+        "runtime.png",
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def report_html(complete):
+    report = complete / "report.html"
+    if not report.exists():
+        snakemake(complete, "--report", report)
+    return report
+
+
+def test_report_in_a_browser_loads_every_image_and_table(report_html):
+    from report_browser import report_problems
+
+    assert report_problems(report_html, REPORT_FIGURES) == []
+
+
+def test_report_check_fails_without_a_figure(report_html, tmp_path):
+    """The same check on copies of the report: one figure dropped, one image's bytes broken."""
+    from report_browser import edit_results, report_problems
+
+    def drop(results):
+        del results[next(p for p in results if p.endswith("room/accuracy/accuracy_forward.png"))]
+
+    def corrupt(results):
+        entry = next(r for p, r in results.items() if p.endswith("boxes/accuracy/accuracy_forward.png"))
+        entry["data_uri"] = entry["data_uri"][:60] + "AAAA" + entry["data_uri"][-60:]
+
+    problems = report_problems(edit_results(report_html, tmp_path / "dropped.html", drop), REPORT_FIGURES)
+    assert problems == ["missing from the report: results/room/.../accuracy_forward.png"]
+    problems = report_problems(edit_results(report_html, tmp_path / "corrupt.html", corrupt), REPORT_FIGURES)
+    assert len(problems) == 1 and problems[0].startswith("image does not load:") and "boxes" in problems[0]

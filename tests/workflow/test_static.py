@@ -21,10 +21,10 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 # run show); duplicates_crop, one job per instance, joins once it has.
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
-RULES |= {"evaluate_duplicates", "edit"}
+RULES |= {"evaluate_duplicates", "edit", "accuracy", "summary"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
-RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit"}
+RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "accuracy"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -155,7 +155,7 @@ BAD_CONFIGS = {
         {"render": {"spp": 4}, "scene": {}},
         [
             "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
-            "duplicates_material, milo, evaluate, edit, export"
+            "duplicates_material, milo, evaluate, accuracy, edit, export"
         ],
     ),
     "typo in a scene": (

@@ -112,5 +112,7 @@ FULL_RUN_JOBS = {
     "evaluate": 1,
     "evaluate_duplicates": 1,
     "edit": 1,
+    "accuracy": 2,
+    "summary": 2,
     "all": 1,
 }

@@ -305,6 +305,35 @@ def _spheres(values) -> list[dict] | None:
     return spheres
 
 
+def cmd_accuracy(args):
+    from .accuracy import stage
+
+    runs = []
+    if args.milo:  # the configured run: evaluate's scored snapshots if given, else its log
+        runs.append(
+            {"dir": args.milo, "metrics": args.metrics, "source": "milo", "label": "configured", "default": True}
+        )
+    stage.run(
+        args.scene,
+        args.features,
+        args.out,
+        images_dir=args.images,
+        runs=runs,
+        budget=args.budget,
+        default_spp=args.default_spp,
+        gradient_spp=args.gradient_spp,
+        camera=args.camera,
+        seed=args.seed,
+        device=args.device,
+    )
+
+
+def cmd_summary(args):
+    from .accuracy import summary
+
+    summary.run(args.results, args.out)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -573,6 +602,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
     p.set_defaults(func=cmd_evaluate)
+
+    p = stages.add_parser("accuracy", help="accuracy against time for every knob, the knee, the floors (issue 15)")
+    p.add_argument("--scene", required=True, help="the scene directory the workflow renders")
+    p.add_argument("--features", required=True, help="its features.json (the configured default)")
+    p.add_argument("--out", required=True, help="directory to write (accuracy_vs_time.csv, accuracy.json, plots)")
+    p.add_argument("--images", help="the captured images: the gradient sweep's loss (none: no gradient sweep)")
+    p.add_argument("--milo", help="a MILO training directory (log.csv, training.json): the recovery rows")
+    p.add_argument("--metrics", help="evaluate's metrics.json: its scored snapshots are the recovery's errors")
+    p.add_argument(
+        "--run", action="append", metavar="SOURCE=DIR", help="another training run (log.csv, training.json), repeatable"
+    )
+    p.add_argument("--budget", default="quick", help="quick (CI, seconds to a minute) or full (the README's figures)")
+    p.add_argument("--default-spp", type=int, default=256, help="the configured render.spp (highlighted)")
+    p.add_argument("--gradient-spp", type=int, default=16, help="the configured gradients.spp (highlighted)")
+    p.add_argument("--camera", help="the camera swept (default: the scene's first)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_accuracy)
+
+    p = stages.add_parser("summary", help="a scene's metrics beside the papers' and each rule's time and memory")
+    p.add_argument("--results", required=True, help="the scene's results folder (results/{scene})")
+    p.add_argument("--out", required=True, help="directory to write (runtime.html, runtime.png, metrics.html)")
+    p.set_defaults(func=cmd_summary)
 
     from .bench import BENCHMARKS
 

@@ -572,6 +572,8 @@ def scene_targets(scene):
             targets.append(f"{results}/edits")
     if recovers(scene) and is_synthetic(scene):
         targets.append(f"{results}/report")
+    if recovers(scene) and has_cameras(scene):
+        targets += [f"{results}/accuracy", f"{results}/summary"]
     return targets
 
 
@@ -836,6 +838,59 @@ def edit_truth_option(wildcards):
 def device_option(wildcards):
     device = config["device"]
     return f"--device {shlex.quote(device)}" if device else ""
+
+
+# ---------------------------------------------------------------------------- accuracy
+# (the input functions of workflow/rules/accuracy.smk)
+
+ACCURACY_RUNTIME = {
+    "quick": 20,
+    "full": 240,
+}  # minutes a job may run (a cluster's --time)
+
+
+def accuracy_inputs(wildcards):
+    """A multiview scene's captured images (the gradient sweep's loss) and its training run
+    (log.csv, training.json; a synthetic scene's scored snapshots from evaluate). A recovery
+    stage of another mode joins here once it writes the same log (accuracy/recovery.py).
+    """
+    scene = wildcards.scene
+    if mode(scene) != "multiview":
+        return {}
+    inputs = {
+        "cameras": f"results/{scene}/cameras",
+        "training": f"results/{scene}/milo/training.json",
+        "log_csv": f"results/{scene}/milo/log.csv",
+    }
+    if is_synthetic(scene):
+        inputs["evaluation"] = f"results/{scene}/report"
+    return inputs
+
+
+def accuracy_options(wildcards):
+    scene = wildcards.scene
+    options = []
+    if mode(scene) == "multiview":
+        options += [
+            f"--images results/{scene}/cameras/images",
+            f"--milo results/{scene}/milo",
+        ]
+        if is_synthetic(scene):
+            options.append(f"--metrics results/{scene}/report/metrics.json")
+    camera = config["accuracy"]["camera"]
+    if camera:
+        options.append(f"--camera {shlex.quote(camera)}")
+    return " ".join(options)
+
+
+def accuracy_runtime(wildcards):
+    return ACCURACY_RUNTIME[config["accuracy"]["budget"]]
+
+
+def summary_inputs(wildcards):
+    """Everything the scene builds (the summary reads their benchmark records and metrics)."""
+    summary = f"results/{wildcards.scene}/summary"
+    return [t for t in scene_targets(wildcards.scene) if t != summary]
 
 
 # ---------------------------------------------------------------------------- resources

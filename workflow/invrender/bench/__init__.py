@@ -14,6 +14,8 @@
   triangles, beside a B = 1 render of ours and Mitsuba's (``traversal.py``; docs/benchmarks.md).
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
+- ``accuracy``: the accuracy stage's full sweep on the demo room, with bench milo's runs as the
+  recovery rows (``accuracy.py``; docs/accuracy.md).
 - ``duplicates``: Structure from Duplicates on the synthetic fixtures beside the paper's Table 2,
   with the rotation-search and SIFT ablations (``duplicates.py``; docs/benchmarks.md).
 
@@ -27,11 +29,12 @@ from __future__ import annotations
 import importlib
 
 # modules here: run(quick, out, device)
-BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal", "duplicates")
+BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal", "duplicates", "accuracy")
 OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
     "render": ("sections",),
     "duplicates": ("scenes", "variants", "work"),
+    "accuracy": ("work",),
 }  # what only some take
 
 

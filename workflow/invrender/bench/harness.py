@@ -7,7 +7,6 @@ measure their own thing with these; docs/benchmarks.md says how they are read.
 
 from __future__ import annotations
 
-import csv
 import json
 import logging
 import math
@@ -17,12 +16,13 @@ import subprocess
 import sys
 import threading
 import time
-import warnings
 from dataclasses import asdict
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+
+from ..render.measure import clock, quiet_pyopencl, write_csv  # noqa: F401 - the benchmarks import them from here
 
 log = logging.getLogger("invrender.bench")
 
@@ -35,20 +35,8 @@ MIN_SPP_TO_JUDGE = 1000  # fewer samples per pixel: no verdict on whether two im
 # ---------------------------------------------------------------------------------------------
 
 
-def clock(fn, *args, **kwargs):
-    """(result, wall seconds, CPU seconds of this process: all its threads)."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - wall, time.process_time() - cpu
-
-
 def median(values) -> float:
     return float(np.median(np.asarray(values, np.float64)))
-
-
-def quiet_pyopencl():
-    # Renderer.render looks its kernel up per call; pyopencl warns each time (a cost we measure).
-    warnings.filterwarnings("ignore", message=".*has been retrieved more than once.*")
 
 
 _seed_blocks = iter(range(1, 2**31, 100_003))
@@ -271,17 +259,6 @@ def format_table(title: str, columns, rows) -> str:
     line = lambda r: "| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |"
     sep = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
     return "\n".join([f"### {title}", "", line(cells[0]), sep] + [line(r) for r in cells[1:]]) + "\n"
-
-
-def write_csv(path: Path, rows: list[dict]):
-    keys = []
-    for row in rows:
-        keys += [k for k in row if k not in keys]
-    with open(path, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=keys)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in row.items()})
 
 
 def pyplot():

@@ -54,6 +54,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ..render.features import COMPILED_IN_OFF
+from ..render.measure import agreement
 from .harness import (
     PeakRSS,
     clock,
@@ -315,31 +317,6 @@ def reference(runners, spps, progress_desc):
     total = sum(weights.values())
     ref = sum(weights[name] * c["image"] for name, c in converged.items()) / total
     return ref, 1.0 / total, converged
-
-
-def agreement(
-    a: np.ndarray, b: np.ndarray, var_a: float, var_b: float, mean_var_a: float = 0.0, mean_var_b: float = 0.0
-) -> dict:
-    """How two estimates of one image differ: relative difference of the image means with its
-    1-sigma noise, per channel, and the per-pixel RMS difference beyond what the noise explains.
-
-    var_* = mean per-pixel noise variance of each image; mean_var_* = variance of each image's
-    overall mean estimated from independent repeats (catches the heavy tails and pixel
-    correlations that the independent-pixel estimate var / n misses); sigma uses the larger.
-    """
-    mean_b = float(b.mean())
-    n = a.size
-    rel = float((a.mean() - mean_b) / mean_b)
-    sigma = math.sqrt(max((var_a + var_b) / n, mean_var_a + mean_var_b)) / mean_b
-    per_channel = ((a.mean((0, 1)) - b.mean((0, 1))) / b.mean((0, 1))).tolist()
-    mse = float(np.mean((a - b) ** 2))
-    return {
-        "mean_rel_diff": rel,
-        "mean_rel_sigma": sigma,
-        "channel_rel_diff": per_channel,
-        "pixel_mse_over_noise": mse / max(var_a + var_b, 1e-30),
-        "pixel_excess_rmse": math.sqrt(max(0.0, mse - var_a - var_b)),
-    }
 
 
 def equal_rmse(scene, camera, bounces: int, settings: Settings, variant: str, device=None):
@@ -652,27 +629,6 @@ UNNEEDED_ON = (
     ("window", {"environment": True, "window": True}),
     ("env_sampling", {"environment": True, "env_sampling": True}),
     ("one_sided", {"one_sided": True}),
-)
-# Effects compiled in, turned off: (switch, kind, flags, applies). kind "bias": the image loses a
-# term; "variance": a sampling strategy, unbiased, only the noise changes. Emission is dropped only
-# where the sky is left to light the room (else the image is black); the window alone is not,
-# since without it no path reaches the sky of these closed rooms (environment off, with less work).
-COMPILED_IN_OFF = (
-    ("specular off", "bias", {"specular": False}, lambda f: f.specular),
-    (
-        "environment off (window, env sampling with it)",
-        "bias",
-        {"environment": False, "window": False, "env_sampling": False},
-        lambda f: f.environment,
-    ),
-    (
-        "emission off (emitter sampling with it)",
-        "bias",
-        {"emission": False, "emitter_sampling": False},
-        lambda f: f.emission and f.environment,
-    ),
-    ("emitter sampling off", "variance", {"emitter_sampling": False}, lambda f: f.emitter_sampling),
-    ("env sampling off", "variance", {"env_sampling": False}, lambda f: f.env_sampling),
 )
 ROULETTE_BOUNCES, ROULETTE_DEPTH = 10, 3
 

@@ -88,3 +88,26 @@ class Features:
     def read(cls, path) -> Features:
         with open(path) as handle:
             return cls.from_json(json.load(handle))
+
+
+# Effects compiled in, turned off: (switch, kind, flags, applies). kind "bias": the image loses a
+# term; "variance": a sampling strategy, unbiased, only the noise changes. Emission is dropped only
+# where the sky is left to light the room (else the image is black); the window alone is not,
+# since without it no path reaches the sky of these closed rooms (environment off, with less work).
+COMPILED_IN_OFF = (
+    ("specular off", "bias", {"specular": False}, lambda f: f.specular),
+    (
+        "environment off (window, env sampling with it)",
+        "bias",
+        {"environment": False, "window": False, "env_sampling": False},
+        lambda f: f.environment,
+    ),
+    (
+        "emission off (emitter sampling with it)",
+        "bias",
+        {"emission": False, "emitter_sampling": False},
+        lambda f: f.emission and f.environment,
+    ),
+    ("emitter sampling off", "variance", {"emitter_sampling": False}, lambda f: f.emitter_sampling),
+    ("env sampling off", "variance", {"env_sampling": False}, lambda f: f.env_sampling),
+)
