@@ -93,9 +93,7 @@ def test_changing_target_faces_reruns_geometry_and_what_follows(complete, tmp_pa
 
 RERUN_AFTER_GEOMETRY = {
     "geometry": 2,
-    **dict.fromkeys(
-        ("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate"), 1
-    ),
+    **dict.fromkeys(("gradients", "milo_train", "duplicates_material", "bake", "bake_duplicates", "evaluate"), 1),
     **dict.fromkeys(("evaluate_duplicates", "edit"), 1),
     **dict.fromkeys(("features", "render", "export", "accuracy", "summary"), 2),
     "all": 1,
