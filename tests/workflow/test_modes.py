@@ -41,6 +41,7 @@ DUPLICATES_CHAIN = (
     "render",
     "export",
 )
+DUPLICATES_CHAIN += ("accuracy", "summary")
 
 
 def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
@@ -117,7 +118,8 @@ def test_a_multiview_capture_is_recovered_end_to_end(tmp_path):
     is no evaluate: the scene directory comes from milo_train and bake."""
     lay_out(tmp_path, ["kitchen/images/v0.png", "kitchen/mesh.obj", *(f"kitchen/{name}" for name in COLMAP)])
     result = dry_run(tmp_path, {"kitchen": {"capture": {"path": "kitchen"}}}, "-p")
-    stages = ("cameras", "geometry", "gradients", "milo_train", "bake", "features", "render", "export", "all")
+    stages = ("cameras", "geometry", "gradients", "milo_train", "bake", "features", "render", "export")
+    stages += ("accuracy", "summary", "all")
     assert job_counts(result.stdout) == dict.fromkeys(stages, 1)
     assert "geometry kitchen/mesh.obj --out results/kitchen/geometry" in result.stdout
     assert "cameras kitchen/sparse --out results/kitchen/cameras --images kitchen/images" in result.stdout
