@@ -53,6 +53,7 @@ RULE_OF_OUTPUT = {
         **{k: v for k, v in _SHARED.items() if k != "gradients"},
         "segmentation": "segment",
         "duplicates": "duplicates",
+        "material/maps.npz": "duplicates_material",
         "scene": "bake_duplicates",
         "report": "evaluate_duplicates",
     },
