@@ -246,6 +246,7 @@ REPORT_FIGURES = {
         "overlay.png",
         "outlines_view_000.png",
         "accuracy_forward.png",
+        "accuracy_recovery.png",  # the material stage's training log
         "accuracy.html",
         "metrics.html",
         "runtime.html",

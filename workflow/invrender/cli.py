@@ -307,12 +307,20 @@ def _spheres(values) -> list[dict] | None:
 
 def cmd_accuracy(args):
     from .accuracy import stage
+    from .scene.types import SceneError
 
     runs = []
     if args.milo:  # the configured run: evaluate's scored snapshots if given, else its log
         runs.append(
             {"dir": args.milo, "metrics": args.metrics, "source": "milo", "label": "configured", "default": True}
         )
+    for entry in args.run or []:  # SOURCE=DIR: another recovery stage's run (its log.csv, training.json)
+        source, sep, directory = entry.partition("=")
+        if not sep or not directory:
+            raise SceneError(
+                "accuracy --run", "run", f"SOURCE=DIR (e.g. duplicates_material=results/x/material), got {entry!r}"
+            )
+        runs.append({"dir": directory, "source": source, "label": source, "default": not runs})
     stage.run(
         args.scene,
         args.features,

@@ -851,10 +851,16 @@ ACCURACY_RUNTIME = {
 
 def accuracy_inputs(wildcards):
     """A multiview scene's captured images (the gradient sweep's loss) and its training run
-    (log.csv, training.json; a synthetic scene's scored snapshots from evaluate). A recovery
-    stage of another mode joins here once it writes the same log (accuracy/recovery.py).
+    (log.csv, training.json; a synthetic scene's scored snapshots from evaluate); a duplicates
+    scene's material run (its log.csv, the same columns: accuracy/recovery.py).
     """
     scene = wildcards.scene
+    if mode(scene) == "duplicates":
+        material = f"results/{scene}/material"
+        return {
+            "training": f"{material}/training.json",
+            "log_csv": f"{material}/log.csv",
+        }
     if mode(scene) != "multiview":
         return {}
     inputs = {
@@ -877,6 +883,8 @@ def accuracy_options(wildcards):
         ]
         if is_synthetic(scene):
             options.append(f"--metrics results/{scene}/report/metrics.json")
+    if mode(scene) == "duplicates":
+        options.append(f"--run duplicates_material=results/{scene}/material")
     camera = config["accuracy"]["camera"]
     if camera:
         options.append(f"--camera {shlex.quote(camera)}")
