@@ -358,5 +358,7 @@ def settings_from(values: dict) -> Settings:
         allowed = ", ".join(matching.MATCHERS)
         raise SceneError("duplicates --set", "matcher", f"one of {allowed}, got {settings.matcher!r}")
     if settings.track_size and settings.matcher != "xfeat":
-        raise SceneError("duplicates --set", "track_size", f"0 with the {settings.matcher} matcher (tracks.py is XFeat's)")
+        raise SceneError(
+            "duplicates --set", "track_size", f"0 with the {settings.matcher} matcher (tracks.py is XFeat's)"
+        )
     return settings

@@ -47,7 +47,7 @@ class TrackFeatures:
 
 
 def _turned(crop: Crop, angle_deg: float, canvas: int):
-    (gray, mask), = matching._rotated_inputs(crop, np.array([float(angle_deg)]), canvas)
+    ((gray, mask),) = matching._rotated_inputs(crop, np.array([float(angle_deg)]), canvas)
     return gray, mask
 
 
