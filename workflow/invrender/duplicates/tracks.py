@@ -14,6 +14,11 @@ with a low detection threshold. A pair is matched at the angle the search chose:
 keypoints are turned to that angle and described there (XFeat's descriptor map of the turned
 crop, sampled at them), and LighterGlue matches them with a's upright ones. Every match joins
 two of the copies' fixed keypoints, so a point matched across k copies is one track of k.
+
+Measured with true masks (docs/duplicates.md, "What limits COLMAP's poses"): at 512 px, 13x the
+search's correct matches on box-10-hd and 8x on box-20-hd, whose 20 copies COLMAP then places at
+2.8 degrees mean, 0.88 median (82 mean from the search's matches); box-10-hd's ten it registers
+all, but wrong (look-alike faces matched across copies), so ``track_size`` is off by default.
 """
 
 from __future__ import annotations
