@@ -27,6 +27,15 @@ __all__ = ["Registration", "register", "image_name"]
 log = logging.getLogger(__name__)
 
 QUANTUM = 4  # keypoints closer than 1/QUANTUM pixel are one keypoint
+# Incremental mapping can run from several seeds (different initial pairs and orders), keeping
+# the model that registers the most copies, then reprojects best. The copies' virtual cameras see
+# a small object almost affinely, so a model can start from a depth-reversed pair and still
+# register every copy, consistently wrong: with the true correspondences of box-20-hd at 1 px
+# noise, 3 of 6 seeds gave 20 of 20 copies at 85 degrees (mean reprojection error 1.23 px) and 3
+# gave them at 0.19 degrees (0.99 px). On the matchers' matches every seed is wrong (27-94 degrees
+# on box-20-hd's matches within 2 px of the truth) and the least reprojection error picked the
+# worst, so one seed stays the default (docs/duplicates.md, "Where it stands").
+ATTEMPTS = 1
 
 
 def image_name(instance_id: int) -> str:
@@ -165,6 +174,24 @@ def _largest(reconstructions: dict) -> pycolmap.Reconstruction | None:
     return max(reconstructions.values(), key=lambda r: r.num_reg_images())
 
 
+def _best_of(db_path: Path, workdir: Path, seed: int, min_model_size: int, attempts: int):
+    """The largest model of incremental mapping from seeds seed .. seed + attempts - 1 that
+    registers the most images, then has the least mean reprojection error (ATTEMPTS says why)."""
+    best, best_key = None, None
+    for k in range(attempts):
+        out = workdir / "models" / str(k)
+        out.mkdir(parents=True)
+        options = _mapper_options(seed + k, min_model_size)
+        found = _largest(pycolmap.incremental_mapping(str(db_path), str(workdir), str(out), options))
+        if found is None:
+            continue
+        key = (found.num_reg_images(), -found.compute_mean_reprojection_error())
+        log.info("mapping seed %d: %d images, mean reprojection error %.3f px", seed + k, key[0], -key[1])
+        if best_key is None or key > best_key:
+            best, best_key = found, key
+    return best
+
+
 def register(
     workdir,
     K: np.ndarray,
@@ -174,6 +201,7 @@ def register(
     pairs: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
     seed: int = 0,
     max_error_px: float = 4.0,
+    attempts: int = ATTEMPTS,
 ) -> Registration:
     """Map the instances. ``pairs[(a, b)] = (xy_a, xy_b)``: matched points in full-image pixels.
     ``workdir`` receives database.db and COLMAP's models (replaced if present)."""
@@ -185,9 +213,7 @@ def register(
     image_ids = _database(db_path, K, width, height, instance_ids, pairs)
     _verify(db_path, max_error_px, seed)
     verified = _verified(db_path, image_ids)
-    options = _mapper_options(seed, min_model_size=min(3, len(instance_ids)))
-    reconstructions = pycolmap.incremental_mapping(str(db_path), str(workdir), str(workdir / "models"), options)
-    best = _largest(reconstructions)
+    best = _best_of(db_path, workdir, seed, min(3, len(instance_ids)), attempts)
     poses = {}
     if best is not None:
         by_name = {image_name(i): i for i in instance_ids}

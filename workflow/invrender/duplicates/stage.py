@@ -46,7 +46,7 @@ from ..scene.images import read_mask
 from ..scene.mesh_io import write_ply
 from ..scene.poses import write_poses
 from ..scene.types import Camera, Mesh, SceneError
-from . import hull, mapping, matching, refine
+from . import hull, mapping, matching, refine, tracks
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
@@ -72,6 +72,7 @@ class Settings:
     object_size: float | None = None
     max_error_px: float = 2.0
     seed: int = 0
+    track_size: int = 0  # > 0: re-match every pair at its angle on fixed keypoints of crops this big (tracks.py)
 
 
 def intrinsics(camera: Camera) -> np.ndarray:
@@ -148,6 +149,23 @@ def match_all(crops: dict[int, Crop], features: dict, settings: Settings, progre
     return pairs, report
 
 
+def track_pairs(photo, ids, crops: dict[int, Crop], pair_report: list[dict], settings: Settings):
+    """Every pair the search matched at all, matched again at the angle it chose on each copy's
+    one fixed set of keypoints (tracks.py), from crops of ``track_size`` pixels."""
+    boxes = instance_boxes(ids)
+    features = {
+        i: tracks.detect(make_crop(photo, ids, i, boxes[i], settings.track_size, settings.crop_pad, settings.masked))
+        for i in crops
+    }
+    angles = {tuple(r["pair"]): r["angle_deg"] for r in pair_report if r["matches"] > 0}
+    found = tracks.match_pairs(features, angles)
+    empty = np.zeros((0, 2))
+    pairs = {p: found.get(p, (empty, empty)) for p in itertools.combinations(sorted(crops), 2)}
+    for r in pair_report:
+        r["track_matches"] = int(len(pairs[tuple(r["pair"])][0]))
+    return pairs
+
+
 def object_frame(mesh: Mesh, object_size: float | None) -> tuple[np.ndarray, float, str]:
     """(centre, scale, what fixed the scale): p_colmap = centre + scale * p_obj."""
     positions = mesh.positions.astype(np.float64)
@@ -201,6 +219,8 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     """Match, map, carve and refine; returns everything run writes (COLMAP's frame)."""
     started = time.perf_counter()
     pairs, pair_report = match_all(crops, features, settings, progress)
+    if settings.track_size:
+        pairs = track_pairs(photo, ids, crops, pair_report, settings)
     if not any(len(xy_a) for xy_a, _ in pairs.values()):
         raise SceneError(
             "duplicates", "matches", f"matches between some of the {len(crops)} crops; found none in any pair"
@@ -337,4 +357,8 @@ def settings_from(values: dict) -> Settings:
     if settings.matcher not in matching.MATCHERS:
         allowed = ", ".join(matching.MATCHERS)
         raise SceneError("duplicates --set", "matcher", f"one of {allowed}, got {settings.matcher!r}")
+    if settings.track_size and settings.matcher != "xfeat":
+        raise SceneError(
+            "duplicates --set", "track_size", f"0 with the {settings.matcher} matcher (tracks.py is XFeat's)"
+        )
     return settings
