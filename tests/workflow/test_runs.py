@@ -25,9 +25,6 @@ from workflow_helpers import (
     snakemake_env,
 )
 
-# The tests on the `complete` run share one worker, so the whole toy workflow runs once.
-pytestmark = pytest.mark.xdist_group("workflow_complete")
-
 _SHARED = {
     "capture": "synthesize",
     "cameras": "cameras",
@@ -164,7 +161,6 @@ def _leftovers(workdir: Path) -> list[str]:
     return temporary + markers
 
 
-@pytest.mark.xdist_group("workflow_killed")
 def test_killed_run_resumes_without_redoing_finished_work(tmp_path):
     """Ctrl-C (SIGINT to the process group) while a downstream job runs, then run again. On the
     room alone: what is tested is Snakemake's bookkeeping around a killed job, the same for both
