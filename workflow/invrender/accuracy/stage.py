@@ -28,6 +28,7 @@ from ..scene.format import load_scene
 from ..scene.types import SceneError, require_positive
 from . import figures, forward, front, gradients, recovery
 from .budgets import BUDGETS
+from .summary import html_table
 
 log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
@@ -291,22 +292,6 @@ def markdown(document: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _table(columns, rows) -> str:
-    head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(_cell(r.get(c)))}</td>" for c in columns) + "</tr>" for r in rows
-    )
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def _cell(value) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
-
-
 def html_page(document: dict, rows: list[dict]) -> str:
     """accuracy.md's content as HTML tables (the Snakemake report shows HTML in a frame)."""
     knees = [
@@ -346,13 +331,13 @@ def html_page(document: dict, rows: list[dict]) -> str:
         f"<p>RMSE slope against spp: {rate['slope']:.3f} (Monte Carlo: -0.5). Reference "
         f"{document['reference']['spp']} spp, {document['reference']['bounces']} bounces.</p>",
         "<h3>Knees</h3>",
-        _table(list(knees[0]) if knees else ["family"], knees),
+        html_table(list(knees[0]) if knees else ["family"], knees),
         "<h3>Floors</h3>",
-        _table(["family", "configuration", "floor", "error", "spp", "cause"], floors)
+        html_table(["family", "configuration", "floor", "error", "spp", "cause"], floors)
         if floors
         else "<p>No curve flattened.</p>",
         "<h3>Every configuration</h3>",
-        _table(columns, [_flat(r) for r in rows]),
+        html_table(columns, [_flat(r) for r in rows]),
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"

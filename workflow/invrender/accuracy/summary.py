@@ -153,15 +153,19 @@ def _duplicates_rows(document: dict) -> list[dict]:
     return rows
 
 
-def page(title: str, columns: list[str], rows: list[dict]) -> str:
+def html_table(columns, rows: list[dict]) -> str:
+    """One HTML table: a column per name, a row per dict (missing values as '-')."""
     head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
     body = "".join(
         "<tr>" + "".join(f"<td>{html.escape(_cell(r.get(c)))}</td>" for c in columns) + "</tr>" for r in rows
     )
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def page(title: str, columns: list[str], rows: list[dict]) -> str:
     return (
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>{STYLE}</head>"
-        f"<body><h3>{html.escape(title)}</h3><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody>"
-        "</table></body></html>\n"
+        f"<body><h3>{html.escape(title)}</h3>{html_table(columns, rows)}</body></html>\n"
     )
 
 
