@@ -17,11 +17,15 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
+from workflow_helpers import end_process  # noqa: E402
 
 PACKAGES = ["slurm-wlm", "slurmdbd", "mariadb-server", "munge"]
 COMMANDS = ["munged", "mariadb-install-db", "mariadbd", "slurmdbd", "slurmctld", "slurmd", "sacctmgr", "sbatch"]
@@ -122,13 +126,7 @@ def _start(stack: contextlib.ExitStack, cmd: list, log: Path, env=None) -> subpr
     )
 
     def stop():
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        end_process(process, signal.SIGTERM, timeout=30)
         out.close()
 
     stack.callback(stop)

@@ -22,7 +22,7 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests" / "workflow"))
-from workflow_helpers import snakemake_env  # noqa: E402
+from workflow_helpers import end_process, snakemake_env  # noqa: E402
 
 CONFIG = Path(__file__).with_name("config.yaml")
 PROFILE = REPO / "workflow" / "profiles" / "slurm"
@@ -62,13 +62,7 @@ def children():
     started: list[subprocess.Popen] = []
     yield started
     for process in started:
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.communicate(timeout=120)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
+        end_process(process, signal.SIGINT, timeout=120)
 
 
 def _popen(cluster, cmd, children) -> subprocess.Popen:

@@ -116,3 +116,15 @@ FULL_RUN_JOBS = {
     "summary": 2,
     "all": 1,
 }
+
+
+def end_process(process: subprocess.Popen, sig: int, timeout: float) -> None:
+    """Ask a still running process to stop with `sig`; kill it if it has not within `timeout` s."""
+    if process.poll() is not None:
+        return
+    process.send_signal(sig)
+    try:
+        process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
