@@ -46,6 +46,9 @@ _COMMON = {
     # sparsity: mean s, so specular texels appear only where highlights ask for them (the role of
     # the paper's sparse latent KL: most of a common object is one dielectric material)
     "sparsity": 0.01,
+    # sky smoothness: neighbouring kg texels have similar log radiance (L1, so a horizon and a sun stay
+    # sharp); without it the directions the copies barely reflect fit the noise in any colour
+    "sky_smoothness": 0.01,
     # energy bound kd + ks <= 1 (render/losses.energy_excess): the two lobes may not reflect more than arrives
     "energy": 1.0,
     "seed": 0,
@@ -100,7 +103,7 @@ def _check(s: dict, where: str) -> None:
         raise SceneError(where, "start", f"one of {', '.join(STARTS)}, got {s['start']!r}")
     if not 0 < s["object_share"] <= 1:
         raise SceneError(where, "object_share", f"a fraction in (0, 1], got {s['object_share']}")
-    for key in ("smoothness", "binary", "sparsity", "energy"):
+    for key in ("smoothness", "binary", "sparsity", "energy", "sky_smoothness"):
         if s[key] < 0:
             raise SceneError(where, key, f"a weight >= 0, got {s[key]}")
 

@@ -21,11 +21,13 @@ from scipy.spatial import cKDTree
 
 from ..render.losses import energy_excess
 from ..scene.atlas import AtlasTexels
+from ..scene.cubemap import texel_directions
 from ..scene.types import ATLAS_MAPS, Atlas, Maps
 
 F0 = 0.04  # a dielectric's reflectance at normal incidence (the paper's 0.02; MILO's default ks 0.04)
 KA_MIN = 1e-3  # ka > 0 keeps the Beckmann lobe finite
 SKY_LOG_LIMIT = 20.0  # kg = exp(g), g below this: no overflow while a step overshoots
+SKY_NEIGHBOURS = 8  # each sky texel's neighbours in the sky prior: the 3 x 3 block around it
 CLAMP = 1e-3  # starting values are kept this far inside (0, 1) so their logits are finite
 
 
@@ -51,13 +53,25 @@ def neighbour_pairs(texels: AtlasTexels, radius: float) -> np.ndarray:
     return flat[pairs]
 
 
+def sky_neighbour_pairs(n: int, k: int = SKY_NEIGHBOURS) -> np.ndarray:
+    """(m, 2) flat indices of each 6 x n x n cube texel and its k nearest by direction, across
+    the cube's edges too. Nearest rather than within a radius: a face's centre texels span
+    about three times the solid angle of its corners', so a radius leaves them alone."""
+    directions = texel_directions(n).reshape(-1, 3).astype(np.float64)
+    k = min(k, len(directions) - 1)
+    _, nearest = cKDTree(directions).query(directions, k=k + 1)
+    pairs = np.stack([np.repeat(np.arange(len(directions)), k), nearest[:, 1:].reshape(-1)], 1)
+    return np.unique(np.sort(pairs, 1), axis=0)
+
+
 class TexelMaterial(torch.nn.Module):
     """The unconstrained arrays of every material set and of the sky."""
 
-    def __init__(self, start: dict[str, Atlas], kg: np.ndarray, pairs: dict[str, np.ndarray]):
+    def __init__(self, start: dict[str, Atlas], kg: np.ndarray, pairs: dict[str, np.ndarray], sky_pairs: np.ndarray):
         super().__init__()
         self.names = list(start)
         self.pairs = {name: torch.from_numpy(p) for name, p in pairs.items()}
+        self.sky_pairs = torch.from_numpy(sky_pairs)
         for name, atlas in start.items():
             strength = (np.asarray(atlas.ks, np.float64).mean(-1) - F0) / (1 - F0)
             self.register_parameter(f"{name}_kd", torch.nn.Parameter(_logit(atlas.kd)))
@@ -109,6 +123,7 @@ class TexelMaterial(torch.nn.Module):
     def regularisers(self, settings: dict) -> dict[str, torch.Tensor]:
         """The weighted regularisers (config.py says why each is there), summed over the sets."""
         terms = {key: torch.zeros(()) for key in ("smoothness", "binary", "sparsity", "energy")}
+        terms["sky_smoothness"] = settings["sky_smoothness"] * self._sky_variation()
         for name in self.names:
             m = self.maps(name)
             s = m["s"]
@@ -121,3 +136,12 @@ class TexelMaterial(torch.nn.Module):
                 difference = (values[pairs[:, 0]] - values[pairs[:, 1]]).abs().sum(-1).mean()
                 terms["smoothness"] = terms["smoothness"] + settings["smoothness"] * difference
         return terms
+
+    def _sky_variation(self) -> torch.Tensor:
+        """Mean |log kg_i - log kg_j| over neighbouring sky texels, RGB summed: L1 in log radiance,
+        so a horizon or a sun stays sharp while the directions no copy reflects take their
+        neighbours' values instead of whatever fits the noise."""
+        if not len(self.sky_pairs):
+            return torch.zeros(())
+        g = torch.clamp(self.sky, max=SKY_LOG_LIMIT).reshape(-1, 3)
+        return (g[self.sky_pairs[:, 0]] - g[self.sky_pairs[:, 1]]).abs().sum(-1).mean()

@@ -39,9 +39,9 @@ from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
 from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
-from .material import F0, TexelMaterial, neighbour_pairs
+from .material import F0, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
 from .rays import SUPPORT_ID, pixel_pools
-from .support import support_mesh, support_object, support_texels
+from .support import first_sky, support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training
 
 log = logging.getLogger(__name__)
@@ -129,6 +129,8 @@ def run(
     pools = pixel_pools(renderer, cameras, images, masks, registered, support is not None)
     if len(pools.object) == 0:
         raise SceneError(masks_path, "instances", "pixels of the registered copies in the images")
+    if len(pools.support):
+        kg = first_sky(n, support[0], np.median(pools.support_target, 0))
     pairs = {"object": neighbour_pairs(texels, settings["smoothness_radius"])}
     if support is not None:
         pairs["support"] = neighbour_pairs(support[1], settings["smoothness_radius"])
@@ -139,7 +141,7 @@ def run(
     median = float(max(np.median(pixels @ LUMINANCE), 1e-3))
     training = Training(
         settings,
-        TexelMaterial(materials, kg, pairs),
+        TexelMaterial(materials, kg, pairs, sky_neighbour_pairs(n)),
         renderer,
         scene.packing,
         cameras,

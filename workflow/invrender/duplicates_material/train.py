@@ -22,7 +22,7 @@ from ..scene.types import ATLAS_MAPS, Camera, Maps
 from .material import TexelMaterial
 from .rays import RayPools
 
-REGULARISERS = ("smoothness", "binary", "sparsity", "energy")
+REGULARISERS = ("smoothness", "binary", "sparsity", "energy", "sky_smoothness")
 LOG_COLUMNS = (
     "iteration",
     "wall_time",

@@ -1,0 +1,66 @@
+"""The sky's start and prior: below the support's horizon the support's radiance, above it white;
+neighbouring sky texels pulled together in log radiance."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from invrender.duplicates_material.material import TexelMaterial, sky_neighbour_pairs
+from invrender.duplicates_material.support import first_sky
+from invrender.scene.cubemap import texel_directions
+from invrender.scene.types import Atlas, Mesh
+
+
+def _tilted_floor(normal) -> Mesh:
+    normal = np.asarray(normal, np.float64) / np.linalg.norm(normal)
+    u = np.cross(normal, [0.0, 0.0, 1.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)  # (u, v, normal) right-handed: the quad faces +normal
+    corners = np.array([-u - v, u - v, u + v, -u + v], np.float32)
+    return Mesh(positions=corners, faces=np.array([[0, 1, 2], [0, 2, 3]], np.int32), uvs=np.zeros((4, 2), np.float32))
+
+
+def test_the_sky_below_the_supports_horizon_starts_at_its_radiance():
+    normal = np.array([0.2, 1.0, -0.1])
+    kg = first_sky(8, _tilted_floor(normal), [0.3, 0.2, 0.1])
+    below = texel_directions(8) @ normal < 0
+    assert 0.4 < below.mean() < 0.6
+    np.testing.assert_array_equal(kg[below], np.broadcast_to([0.3, 0.2, 0.1], kg[below].shape).astype(np.float32))
+    np.testing.assert_array_equal(kg[~below], 1.0)
+
+
+def test_without_a_support_the_sky_starts_white():
+    np.testing.assert_array_equal(first_sky(4, None, [0.3, 0.2, 0.1]), 1.0)
+
+
+def test_sky_pairs_join_each_texel_to_its_neighbours_across_the_cube_edges():
+    n = 6
+    pairs = sky_neighbour_pairs(n)
+    directions = texel_directions(n).reshape(-1, 3)
+    angles = np.degrees(np.arccos(np.clip((directions[pairs[:, 0]] * directions[pairs[:, 1]]).sum(-1), -1, 1)))
+    assert angles.max() < 2.2 * 90 / n  # neighbours and diagonal neighbours, never across the sphere
+    faces = np.repeat(np.arange(6), n * n)
+    assert (faces[pairs[:, 0]] != faces[pairs[:, 1]]).sum() >= 12 * n  # every cube edge joins two faces
+    assert np.bincount(pairs.ravel(), minlength=6 * n * n).min() >= 7  # a cube corner's texel has 7
+
+
+def _material(kg) -> TexelMaterial:
+    atlas = Atlas.uniform((4, 4), kd=0.5, ks=0.04, ka=0.1)
+    return TexelMaterial({"object": atlas}, kg, {"object": np.zeros((0, 2), np.int64)}, sky_neighbour_pairs(4))
+
+
+def test_the_sky_prior_is_zero_for_a_uniform_sky_and_pulls_an_outlier_towards_its_neighbours():
+    settings = {"smoothness": 0.0, "binary": 0.0, "sparsity": 0.0, "energy": 0.0, "sky_smoothness": 1.0}
+    uniform = _material(np.full((6, 4, 4, 3), 0.7, np.float32))
+    assert float(uniform.regularisers(settings)["sky_smoothness"]) == 0.0
+    kg = np.full((6, 4, 4, 3), 0.7, np.float32)
+    kg[2, 1, 1] = 7.0
+    spiky = _material(kg)
+    term = spiky.regularisers(settings)["sky_smoothness"]
+    assert float(term) > 0
+    term.backward()
+    grad = spiky.sky.grad.numpy()
+    assert (grad[2, 1, 1] > 0).all()  # a descent step lowers the outlier
+    assert (grad.reshape(-1, 3)[np.abs(grad.reshape(-1, 3)).sum(-1) > 0] != 0).any()
+    assert torch.isfinite(spiky.sky.grad).all()
