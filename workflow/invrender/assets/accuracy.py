@@ -17,7 +17,7 @@ import numpy as np
 
 from .asset import Asset
 from .raster import look_at_pose, rasterize
-from .retrieval import retrieve
+from .retrieval import library_descriptors, retrieve
 
 __all__ = ["Shot", "photo_shot", "measure"]
 
@@ -31,6 +31,10 @@ class Shot:
     focal: float
     azimuth_deg: float  # the truth: from where, in the asset's frame, the camera sees it
     elevation_deg: float
+    up: np.ndarray  # the world's up in camera space
+    yaw_deg: float  # the asset's yaw in the room
+    object_centre: np.ndarray  # its bounding box's centre
+    eye: np.ndarray  # the camera's centre
 
 
 def photo_shot(asset: Asset, rng: np.random.Generator) -> Shot:
@@ -43,15 +47,15 @@ def photo_shot(asset: Asset, rng: np.random.Generator) -> Shot:
     centre = 0.5 * (world.min(axis=0) + world.max(axis=0))
     fov = np.radians(rng.uniform(50, 70))
     focal = 0.5 * HEIGHT / np.tan(fov / 2)
-    # Aim a little off the object so it sits off-centre, as in a photo of a room.
-    aim = centre + rng.uniform(-0.25, 0.25, 3) * [distance * WIDTH / HEIGHT, distance, 0] * np.tan(fov / 2)
+    # Aim off the object so it sits anywhere in the middle 60% of the image, as in a photo of a room.
+    aim = centre + rng.uniform(-0.3, 0.3, 3) * [distance * WIDTH / HEIGHT, distance, 0] * np.tan(fov / 2)
     eye = np.array([0.0, eye_height, 0.0])
     R, t = look_at_pose(eye, aim)
     depth, _ = rasterize(world @ R.T + t, asset.mesh.faces, (focal, focal), (WIDTH / 2, HEIGHT / 2), (WIDTH, HEIGHT))
     to_camera = eye - centre
     azimuth = np.degrees(np.arctan2(to_camera[0], to_camera[2]) - yaw) % 360.0
     elevation = np.degrees(np.arctan2(to_camera[1], np.hypot(to_camera[0], to_camera[2])))
-    return Shot(depth > 0, depth, focal, azimuth, elevation)
+    return Shot(depth > 0, depth, focal, azimuth, elevation, R[:, 1].copy(), np.degrees(yaw) % 360.0, centre, eye)
 
 
 def azimuth_error(estimate: float, truth: float, symmetry: int) -> float | None:
@@ -63,16 +67,20 @@ def azimuth_error(estimate: float, truth: float, symmetry: int) -> float | None:
     return float(min(d, period - d))
 
 
-def measure(assets: list[Asset], shots_per_asset: int = 3, seed: int = 0, leave_one_out: bool = False, cache_dir=None) -> dict:
+def measure(
+    assets: list[Asset], shots_per_asset: int = 3, seed: int = 0, leave_one_out: bool = False, cache_dir=None, know_up: bool = True
+) -> dict:
+    """``know_up``: retrieval is told the world's up (as the room stage knows it from the floor)."""
     rng = np.random.default_rng(seed)
+    everything = library_descriptors(assets, cache_dir)
     top1, top3, exact, errors, confusions = [], [], [], [], []
     for index, asset in enumerate(assets):
-        library = assets[:index] + assets[index + 1 :] if leave_one_out else assets
+        library = everything.without(index) if leave_one_out else everything
         for _ in range(shots_per_asset):
             shot = photo_shot(asset, rng)
             if shot.mask.sum() < 64:
                 continue  # off the image: not a query a segmentation would give
-            matches = retrieve(shot.mask, shot.depth, library, k=3, focal=shot.focal, cache_dir=cache_dir)
+            matches = retrieve(shot.mask, shot.depth, library, k=3, focal=shot.focal, up=shot.up if know_up else None)
             top1.append(matches[0].category == asset.category)
             top3.append(any(m.category == asset.category for m in matches))
             exact.append(matches[0].name == asset.name)

@@ -37,8 +37,8 @@ AZIMUTHS = np.arange(0.0, 360.0, 15.0)  # degrees
 ELEVATIONS = (10.0, 30.0)  # degrees above the horizon: a camera at eye height, 2 to 5 m away
 VIEW_DISTANCE = 3.0  # the library's camera, in units of the asset's largest extent (a room's)
 VIEW_SIZE = 64  # pixels: two per descriptor cell
-DEPTH_WEIGHT = 1.0  # the depth image's weight against the silhouette's, applied when comparing
-BLUR_CELLS = 0.0  # Gaussian blur of both images (sigma, cells): tolerance to a shifted edge
+DEPTH_WEIGHT = 2.0  # the depth image's weight against the silhouette's, applied when comparing
+BLUR_CELLS = 1.0  # Gaussian blur of both images (sigma, cells): tolerance to a shifted edge
 MIN_MASK_PIXELS = 16
 DEFAULT_FOV_Y_DEG = 60.0
 
@@ -92,6 +92,38 @@ def describe(mask, depth, focal: float) -> np.ndarray:
     return np.concatenate([silhouette.ravel(), np.ravel(relative)])
 
 
+def centred_view(mask, depth, focal: float, up, principal=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The object's mask and depth as a camera at the same place would see them turned to look
+    at the centre of the mask's bounding box, its image's up along the world's ``up`` (a
+    camera-space vector): what the library's views see (a look-at without roll), without the
+    stretch and tilt an object off the optical axis of a pitched camera gets. Nearest-neighbour
+    resampling; depth is the new camera's z. ``principal`` defaults to the image centre."""
+    mask = np.asarray(mask, bool)
+    h, w = mask.shape
+    cx, cy = principal if principal is not None else (w / 2, h / 2)
+    K = np.array([[focal, 0, cx], [0, focal, cy], [0, 0, 1.0]])
+    ys, xs = np.nonzero(mask)
+    forward = np.linalg.solve(K, [0.5 * (xs.min() + xs.max() + 1), 0.5 * (ys.min() + ys.max() + 1), 1.0])
+    R, _ = look_at_pose([0, 0, 0], forward, up=up)  # old camera axes -> new
+    H = K @ R @ np.linalg.inv(K)
+    # The new image: the warped bounding box of the mask, one pixel of border.
+    x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+    corners = H @ np.array([[x0, x0, x1, x1], [y0, y1, y0, y1], [1, 1, 1, 1]], np.float64)
+    corners = corners[:2] / corners[2]
+    lo = np.floor(corners.min(axis=1)) - 1
+    size = np.minimum(np.ceil(corners.max(axis=1) - lo) + 1, 4096).astype(int)
+    T = np.array([[1, 0, -lo[0]], [0, 1, -lo[1]], [0, 0, 1.0]])
+    new_mask = cv2.warpPerspective(mask.astype(np.uint8), T @ H, tuple(size), flags=cv2.INTER_NEAREST) > 0
+    if depth is None:
+        return new_mask, None
+    old_depth = cv2.warpPerspective(np.asarray(depth, np.float32), T @ H, tuple(size), flags=cv2.INTER_NEAREST)
+    # z' = z (R[2] . r_old), r_old = K^-1 p_old the source pixel's ray with z = 1.
+    u, v = np.meshgrid(np.arange(size[0]) + 0.5, np.arange(size[1]) + 0.5)
+    source = np.linalg.inv(T @ H) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
+    rays = np.linalg.solve(K, source / source[2])
+    return new_mask, old_depth * (R[2] @ rays).reshape(size[1], size[0])
+
+
 # ---------------------------------------------------------------- the library's views
 
 
@@ -126,6 +158,12 @@ class LibraryDescriptors:
     categories: tuple[str, ...]
     views: np.ndarray  # (assets, elevations, azimuths, 2 GRID^2) float32
     key: str
+
+    def without(self, index: int) -> LibraryDescriptors:
+        """The library less one asset (a leave-one-out measurement), without re-rendering."""
+        keep = [i for i in range(len(self.names)) if i != index]
+        pick = lambda seq: tuple(seq[i] for i in keep)  # noqa: E731
+        return LibraryDescriptors(pick(self.names), pick(self.categories), self.views[keep], f"{self.key}-{index}")
 
 
 def _settings() -> bytes:
@@ -206,18 +244,26 @@ def _refined_azimuth(distances: np.ndarray, j: int) -> float:
     return float((AZIMUTHS[j] + np.clip(offset, -0.5, 0.5) * step) % 360.0)
 
 
-def retrieve(mask, depth, assets, k: int = 5, focal: float | None = None, cache_dir=None) -> list[Match]:
+def retrieve(mask, depth, assets, k: int = 5, focal: float | None = None, up=None, cache_dir=None) -> list[Match]:
     """The ``k`` assets whose views best match the object, best first, each with its best view.
 
-    ``mask`` (H, W) bool and ``depth`` (H, W) (any scale, or None) are the whole photo's, so
-    that ``focal`` (the vertical focal length in pixels) defaults to a DEFAULT_FOV_Y_DEG field
-    of view over H; for a crop pass the photo's focal.
+    ``assets`` is a library (a list of Asset) or its ``library_descriptors``.
+    ``mask`` (H, W) bool and ``depth`` (H, W) (any scale, or None) are the whole photo's (the
+    principal point at its centre): ``focal`` (the vertical focal length in pixels) defaults to
+    a DEFAULT_FOV_Y_DEG field of view over H. ``up`` is the world's up in camera space (OpenCV
+    axes; the floor's normal from the room stage): given, the object is first seen as by a
+    camera turned towards it (``centred_view``), which the library's views are; measured in
+    docs/assets.md, it matters for objects off the image centre of a pitched camera.
     """
     mask = np.asarray(mask, bool)
     if focal is None:
         focal = 0.5 * mask.shape[0] / np.tan(np.radians(DEFAULT_FOV_Y_DEG) / 2)
+    if mask.sum() < MIN_MASK_PIXELS:
+        raise ValueError(f"retrieve: the object's mask covers {int(mask.sum())} pixels; at least {MIN_MASK_PIXELS}")
+    if up is not None:
+        mask, depth = centred_view(mask, depth, focal, up)
     query = describe(mask, depth, focal)
-    lib = library_descriptors(assets, cache_dir)
+    lib = assets if isinstance(assets, LibraryDescriptors) else library_descriptors(assets, cache_dir)
     half = GRID * GRID
     difference = (lib.views - query) ** 2
     distances = difference[..., :half].sum(axis=-1) + DEPTH_WEIGHT**2 * difference[..., half:].sum(axis=-1)
