@@ -1,3 +1,28 @@
 """The asset library (PSDR-Room section 4, the object stage): procedural furniture, user
 OBJ/PLY/USD models, and their retrieval by silhouette and depth descriptors of multi-view
-renders. A library like render/: no stage, no rule; docs/assets.md."""
+renders. A library like render/: no stage, no rule; docs/assets.md.
+
+    from invrender import assets
+    library = assets.library(user_dirs)             # [Asset], unit-normalised, named parts
+    matches = assets.retrieve(mask, depth, library, k=5, focal=f, up=floor_normal_in_camera)
+    yaw = assets.yaw_from_view(matches[0].azimuth_deg, object_centre, camera_centre)
+"""
+
+from .asset import Asset
+from .catalog import library, read_model, user_assets
+from .furniture import CATEGORIES, bundled, furniture
+from .retrieval import Match, library_descriptors, retrieve, yaw_from_view
+
+__all__ = [
+    "Asset",
+    "CATEGORIES",
+    "Match",
+    "bundled",
+    "furniture",
+    "library",
+    "library_descriptors",
+    "read_model",
+    "retrieve",
+    "user_assets",
+    "yaw_from_view",
+]

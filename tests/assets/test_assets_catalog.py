@@ -1,11 +1,11 @@
-"""assets.library: user folders of OBJ/PLY/USD models beside the bundled furniture; USD
+"""assets.catalog (assets.library): user folders of OBJ/PLY/USD models beside the bundled furniture; USD
 transforms, units and up axis applied; one SceneError per unreadable model."""
 
 import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdGeom, UsdShade
 
-from invrender.assets import library as lib
+from invrender.assets import catalog as lib
 from invrender.assets.furniture import furniture
 from invrender.assets.primitives import signed_volume
 from invrender.scene.types import SceneError
