@@ -107,7 +107,7 @@ def test_usd_transform_units_and_left_handed_winding(tmp_path):
     "name, text, field",
     [
         ("bad.usda", "#usda 1.0\n(\n  this is not usd\n", "(file)"),
-        ("empty.usda", "#usda 1.0\ndef Xform \"a\" {}\n", "UsdGeom.Mesh"),
+        ("empty.usda", '#usda 1.0\ndef Xform "a" {}\n', "UsdGeom.Mesh"),
         ("bad.obj", "v 0 0 0\nv 1 0 zero\nf 1 2 3\n", "line 2 v"),
         ("bad.ply", "ply\nformat ascii 1.0\nelement vertex 2\n", ""),
     ],

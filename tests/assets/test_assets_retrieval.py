@@ -7,18 +7,19 @@ import pytest
 
 from invrender.assets import retrieval
 from invrender.assets.accuracy import azimuth_error, measure, photo_shot
-from invrender.assets.furniture import furniture
 from invrender.assets.catalog import library
+from invrender.assets.furniture import furniture
 from invrender.assets.primitives import box, quad
-from invrender.assets.raster import look_at_pose, rasterize
+from invrender.assets.raster import rasterize, render_depth
 from invrender.cli import main
+from invrender.scene.cameras import look_at, pinhole_camera
 
 LIBRARY = library()
 
 
 def test_a_cube_face_on_covers_the_pixel_centres_inside_its_projection():
     cube = box([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5])
-    R, t = look_at_pose([0, 0, 2.5], [0, 0, 0])
+    R, t = look_at([0, 0, 2.5], [0, 0, 0])
     depth, face = rasterize(cube.positions @ R.T + t, cube.faces, (87, 87), (32, 32), (64, 64))
     # The front face (z = 2 m) spans 32 +- 87 * 0.5 / 2 = [10.25, 53.75]: centres 10.5 .. 53.5.
     expected = np.zeros((64, 64), bool)
@@ -26,6 +27,9 @@ def test_a_cube_face_on_covers_the_pixel_centres_inside_its_projection():
     np.testing.assert_array_equal(depth > 0, expected)
     np.testing.assert_allclose(depth[expected], 2.0, rtol=1e-12)
     assert set(np.unique(face[expected])) <= set(np.flatnonzero(cube.part == 4))  # the +z side faces the camera
+    # The same through an invrender camera.
+    camera = pinhole_camera("c", [0, 0, 2.5], [0, 0, 0], 64, 64, np.degrees(2 * np.arctan(32 / 87)))
+    np.testing.assert_allclose(render_depth(cube.positions, cube.faces, camera)[0], depth, rtol=1e-12)
 
 
 def test_depth_is_perspective_correct_on_a_slanted_plane():
@@ -43,8 +47,10 @@ def test_depth_is_perspective_correct_on_a_slanted_plane():
 
 
 def shot_at(asset, distance, depth_scale=1.0, size=320):
-    R, t = look_at_pose([0, 1.4, distance], [0, 0.5 * asset.extent[1], 0])
-    depth, _ = rasterize(asset.mesh.positions @ R.T + t, asset.mesh.faces, (300, 300), (size / 2, size / 2), (size, size))
+    R, t = look_at([0, 1.4, distance], [0, 0.5 * asset.extent[1], 0])
+    depth, _ = rasterize(
+        asset.mesh.positions @ R.T + t, asset.mesh.faces, (300, 300), (size / 2, size / 2), (size, size)
+    )
     return depth > 0, depth * depth_scale
 
 
@@ -120,7 +126,9 @@ def test_the_cache_file_is_read_back_and_keyed_by_the_meshes(cache, monkeypatch)
     assert retrieval.library_key(moved) != again.key
     # A damaged file is rebuilt, not trusted.
     files[0].write_bytes(b"not npz")
-    monkeypatch.setattr(retrieval, "view_descriptors", lambda asset: np.zeros((2, 24, 2 * retrieval.GRID**2), np.float32))
+    monkeypatch.setattr(
+        retrieval, "view_descriptors", lambda asset: np.zeros((2, 24, 2 * retrieval.GRID**2), np.float32)
+    )
     monkeypatch.setattr(retrieval, "_LIBRARIES", {})
     damaged = [LIBRARY, subset][0 if "descriptors-" + retrieval.library_key(LIBRARY)[:24] in files[0].name else 1]
     assert retrieval.library_descriptors(damaged, cache).views.max() == 0

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.cameras import look_at
 from .asset import Asset
-from .raster import look_at_pose, rasterize
+from .raster import rasterize
 from .retrieval import library_descriptors, retrieve
 
 __all__ = ["Shot", "photo_shot", "measure"]
@@ -50,7 +51,7 @@ def photo_shot(asset: Asset, rng: np.random.Generator) -> Shot:
     # Aim off the object so it sits anywhere in the middle 60% of the image, as in a photo of a room.
     aim = centre + rng.uniform(-0.3, 0.3, 3) * [distance * WIDTH / HEIGHT, distance, 0] * np.tan(fov / 2)
     eye = np.array([0.0, eye_height, 0.0])
-    R, t = look_at_pose(eye, aim)
+    R, t = look_at(eye, aim)
     depth, _ = rasterize(world @ R.T + t, asset.mesh.faces, (focal, focal), (WIDTH / 2, HEIGHT / 2), (WIDTH, HEIGHT))
     to_camera = eye - centre
     azimuth = np.degrees(np.arctan2(to_camera[0], to_camera[2]) - yaw) % 360.0
@@ -68,7 +69,12 @@ def azimuth_error(estimate: float, truth: float, symmetry: int) -> float | None:
 
 
 def measure(
-    assets: list[Asset], shots_per_asset: int = 3, seed: int = 0, leave_one_out: bool = False, cache_dir=None, know_up: bool = True
+    assets: list[Asset],
+    shots_per_asset: int = 3,
+    seed: int = 0,
+    leave_one_out: bool = False,
+    cache_dir=None,
+    know_up: bool = True,
 ) -> dict:
     """``know_up``: retrieval is told the world's up (as the room stage knows it from the floor)."""
     rng = np.random.default_rng(seed)

@@ -77,7 +77,10 @@ def chair(d: Dims, style: int) -> PartBuilder:
     back_h = d(0.55, 0.7) if style == 3 else d(0.35, 0.5)
     b = PartBuilder()
     for cx, cz in corners(w / 2 - leg / 2 - 0.01, dp / 2 - leg / 2 - 0.01):
-        b.add("legs", rod(cx, cz, leg / 2, 0, seat_y - seat_t) if style == 1 else block(cx, cz, leg, leg, 0, seat_y - seat_t))
+        b.add(
+            "legs",
+            rod(cx, cz, leg / 2, 0, seat_y - seat_t) if style == 1 else block(cx, cz, leg, leg, 0, seat_y - seat_t),
+        )
     b.add("seat", block(0, 0, w, dp, seat_y - seat_t, seat_y))
     back_z = -dp / 2 + 0.01 + leg / 2
     top = seat_y + back_h
@@ -131,7 +134,10 @@ def drawer_stack(b: PartBuilder, cx, width, depth, y0, y1, front_z, drawers: int
     step = (y1 - y0 - 0.05) / drawers
     for k in range(drawers):
         lo = y0 + 0.05 + k * step
-        b.add("drawers", slab(cx - width / 2 + gap, cx + width / 2 - gap, lo + gap, lo + step - gap, front_z, front_z + 0.018))
+        b.add(
+            "drawers",
+            slab(cx - width / 2 + gap, cx + width / 2 - gap, lo + gap, lo + step - gap, front_z, front_z + 0.018),
+        )
         mid = lo + 0.65 * step
         b.add("handles", slab(cx - 0.05, cx + 0.05, mid - 0.008, mid + 0.008, front_z + 0.018, front_z + 0.04))
 
@@ -157,15 +163,22 @@ def desk(d: Dims, style: int) -> PartBuilder:
             b.add("frame", block(cx, cz, leg, leg, 0, h - top_t))
         drawer_stack(b, 0, 0.6, dp - 0.1, h - top_t - 0.14, h - top_t, front - 0.02, 1)
     if style != 2:  # the modesty panel at the back, between the supports
-        b.add("frame", slab(-w / 2 + 0.05, w / 2 - 0.05, h - top_t - d(0.3, 0.4), h - top_t, -dp / 2 + 0.04, -dp / 2 + 0.06))
+        b.add(
+            "frame",
+            slab(-w / 2 + 0.05, w / 2 - 0.05, h - top_t - d(0.3, 0.4), h - top_t, -dp / 2 + 0.04, -dp / 2 + 0.06),
+        )
     return b
 
 
 def cabinet(d: Dims, style: int) -> PartBuilder:
     """Styles: 0 low sideboard, 1 tall wardrobe, 2 bedside cabinet, 3 medium cupboard. A plinth
     recessed at the front, a top overhanging at the front and sides, doors with handles."""
-    w, h = {0: (d(1.0, 1.4), d(0.7, 0.9)), 1: (d(0.8, 1.1), d(1.8, 2.0)), 2: (d(0.45, 0.55), d(0.5, 0.6)),
-            3: (d(0.7, 0.9), d(1.0, 1.3))}[style]
+    w, h = {
+        0: (d(1.0, 1.4), d(0.7, 0.9)),
+        1: (d(0.8, 1.1), d(1.8, 2.0)),
+        2: (d(0.45, 0.55), d(0.5, 0.6)),
+        3: (d(0.7, 0.9), d(1.0, 1.3)),
+    }[style]
     dp = d(0.35, 0.45) if style == 2 else d(0.45, 0.6)
     plinth, top_t = d(0.06, 0.1), 0.025
     b = PartBuilder()
@@ -186,12 +199,18 @@ def cabinet(d: Dims, style: int) -> PartBuilder:
 def shelf(d: Dims, style: int) -> PartBuilder:
     """An open bookcase: two sides, top, bottom on a plinth, a back panel, evenly spaced
     shelves. Styles: 0 tall, 1 tall and wide, 2 low and wide, 3 narrow."""
-    w, h = {0: (d(0.7, 0.9), d(1.7, 2.0)), 1: (d(1.0, 1.2), d(1.8, 2.0)), 2: (d(1.2, 1.6), d(0.75, 1.0)),
-            3: (d(0.4, 0.5), d(1.2, 1.6))}[style]
+    w, h = {
+        0: (d(0.7, 0.9), d(1.7, 2.0)),
+        1: (d(1.0, 1.2), d(1.8, 2.0)),
+        2: (d(1.2, 1.6), d(0.75, 1.0)),
+        3: (d(0.4, 0.5), d(1.2, 1.6)),
+    }[style]
     dp, t, plinth = d(0.26, 0.4), d(0.018, 0.026), d(0.05, 0.08)
     b = PartBuilder()
     for sx in (-1, 1):
-        b.add("frame", slab(sx * w / 2 - (t if sx > 0 else 0), sx * w / 2 + (t if sx < 0 else 0), 0, h, -dp / 2, dp / 2))
+        b.add(
+            "frame", slab(sx * w / 2 - (t if sx > 0 else 0), sx * w / 2 + (t if sx < 0 else 0), 0, h, -dp / 2, dp / 2)
+        )
     b.add("frame", slab(-w / 2 + t, w / 2 - t, h - t, h, -dp / 2, dp / 2))
     b.add("frame", slab(-w / 2 + t, w / 2 - t, 0, plinth + t, -dp / 2, dp / 2 - 0.015))
     b.add("back", slab(-w / 2 + t, w / 2 - t, plinth + t, h - t, -dp / 2, -dp / 2 + 0.008))
@@ -237,7 +256,17 @@ def sofa(d: Dims, style: int) -> PartBuilder:
     inner = w / 2 - (arm_w if arms else 0)
     if arms:
         for sx in (-1, 1):
-            b.add("frame", slab(sx * w / 2 - (arm_w if sx > 0 else 0), sx * w / 2 + (arm_w if sx < 0 else 0), base_top, arm_top, -dp / 2, dp / 2))
+            b.add(
+                "frame",
+                slab(
+                    sx * w / 2 - (arm_w if sx > 0 else 0),
+                    sx * w / 2 + (arm_w if sx < 0 else 0),
+                    base_top,
+                    arm_top,
+                    -dp / 2,
+                    dp / 2,
+                ),
+            )
     seats = {0: 2, 1: 3, 2: 1, 3: 3}[style]
     cw = 2 * inner / seats
     for k in range(seats):
@@ -270,8 +299,12 @@ def lamp(d: Dims, style: int) -> tuple[PartBuilder, int]:
 
 def generic_box(d: Dims, style: int) -> tuple[PartBuilder, int]:
     """The fallback: a closed box. Styles: 0 cube-like, 1 low and wide, 2 tall and narrow, 3 long."""
-    w, h, dp = {0: (d(0.4, 0.6), d(0.4, 0.6), d(0.4, 0.6)), 1: (d(0.8, 1.2), d(0.25, 0.4), d(0.5, 0.7)),
-                2: (d(0.3, 0.45), d(0.9, 1.3), d(0.3, 0.45)), 3: (d(1.2, 1.8), d(0.4, 0.6), d(0.3, 0.45))}[style]
+    w, h, dp = {
+        0: (d(0.4, 0.6), d(0.4, 0.6), d(0.4, 0.6)),
+        1: (d(0.8, 1.2), d(0.25, 0.4), d(0.5, 0.7)),
+        2: (d(0.3, 0.45), d(0.9, 1.3), d(0.3, 0.45)),
+        3: (d(1.2, 1.8), d(0.4, 0.6), d(0.3, 0.45)),
+    }[style]
     b = PartBuilder()
     b.add("body", block(0, 0, w, dp, 0, h))
     return b, 4 if abs(w - dp) < 0.02 * max(w, dp) else 2

@@ -12,20 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["look_at_pose", "rasterize"]
+from ..scene.types import Camera
 
-
-def look_at_pose(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """World-to-camera (R, t) of a camera at ``eye`` looking at ``target``, OpenCV axes, the
-    image's up along ``up``."""
-    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
-    forward = target - eye
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, up)
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    R = np.stack([right, down, forward])
-    return R, -R @ eye
+__all__ = ["rasterize", "render_depth"]
 
 
 def rasterize(positions_cam, faces, focal, centre, size, near: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
@@ -75,3 +64,10 @@ def rasterize(positions_cam, faces, focal, centre, size, near: float = 1e-3) -> 
     winner = w == nearest[pix]
     face.flat[pix[winner]] = tri[t[winner]]
     return depth, face
+
+
+def render_depth(positions, faces, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """``rasterize`` of a mesh given in world coordinates, seen by an invrender camera (its lens
+    distortion ignored)."""
+    p = np.asarray(positions, np.float64) @ camera.R.T + camera.t
+    return rasterize(p, faces, camera.focal, camera.principal_point, (camera.width, camera.height))

@@ -25,8 +25,9 @@ import cv2
 import numpy as np
 
 from ..scene.atomic import atomic_path
+from ..scene.cameras import look_at
 from .asset import Asset
-from .raster import look_at_pose, rasterize
+from .raster import rasterize
 
 __all__ = ["GRID", "AZIMUTHS", "ELEVATIONS", "Match", "describe", "library_descriptors", "retrieve", "yaw_from_view"]
 
@@ -76,7 +77,9 @@ def describe(mask, depth, focal: float) -> np.ndarray:
     ys, xs = np.nonzero(mask)
     box = (ys.min(), ys.max() + 1, xs.min(), xs.max() + 1)
     side = int(np.ceil(max(box[1] - box[0], box[3] - box[2]) * (1 + 2 * MARGIN)))
-    silhouette = cv2.resize(_square_crop(mask.astype(np.float32), box, side), (GRID, GRID), interpolation=cv2.INTER_AREA)
+    silhouette = cv2.resize(
+        _square_crop(mask.astype(np.float32), box, side), (GRID, GRID), interpolation=cv2.INTER_AREA
+    )
     relative = np.zeros(GRID * GRID, np.float32)
     if depth is not None:
         depth = np.asarray(depth, np.float64)
@@ -88,7 +91,10 @@ def describe(mask, depth, focal: float) -> np.ndarray:
             rel = np.clip(rel, -1.0, 1.0).astype(np.float32)
             relative = cv2.resize(_square_crop(rel, box, side), (GRID, GRID), interpolation=cv2.INTER_AREA)
     if BLUR_CELLS > 0:
-        silhouette, relative = (cv2.GaussianBlur(np.asarray(x, np.float32).reshape(GRID, GRID), (0, 0), BLUR_CELLS) for x in (silhouette, relative))
+        silhouette, relative = (
+            cv2.GaussianBlur(np.asarray(x, np.float32).reshape(GRID, GRID), (0, 0), BLUR_CELLS)
+            for x in (silhouette, relative)
+        )
     return np.concatenate([silhouette.ravel(), np.ravel(relative)])
 
 
@@ -104,7 +110,7 @@ def centred_view(mask, depth, focal: float, up, principal=None) -> tuple[np.ndar
     K = np.array([[focal, 0, cx], [0, focal, cy], [0, 0, 1.0]])
     ys, xs = np.nonzero(mask)
     forward = np.linalg.solve(K, [0.5 * (xs.min() + xs.max() + 1), 0.5 * (ys.min() + ys.max() + 1), 1.0])
-    R, _ = look_at_pose([0, 0, 0], forward, up=up)  # old camera axes -> new
+    R, _ = look_at([0, 0, 0], forward, up=up)  # old camera axes -> new
     H = K @ R @ np.linalg.inv(K)
     # The new image: the warped bounding box of the mask, one pixel of border.
     x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
@@ -134,7 +140,7 @@ def view_camera(asset: Asset, azimuth_deg: float, elevation_deg: float):
     target = 0.5 * (p.min(axis=0) + p.max(axis=0))
     a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
     eye = target + VIEW_DISTANCE * np.array([np.sin(a) * np.cos(e), np.sin(e), np.cos(a) * np.cos(e)])
-    R, t = look_at_pose(eye, target)
+    R, t = look_at(eye, target)
     radius = 0.5 * np.linalg.norm(p.max(axis=0) - p.min(axis=0))
     focal = 0.45 * VIEW_SIZE * (VIEW_DISTANCE - radius) / radius
     return R, t, focal
@@ -147,7 +153,9 @@ def view_descriptors(asset: Asset) -> np.ndarray:
     for i, e in enumerate(ELEVATIONS):
         for j, a in enumerate(AZIMUTHS):
             R, t, focal = view_camera(asset, a, e)
-            depth, _ = rasterize(asset.mesh.positions @ R.T + t, asset.mesh.faces, (focal, focal), (c, c), (VIEW_SIZE, VIEW_SIZE))
+            depth, _ = rasterize(
+                asset.mesh.positions @ R.T + t, asset.mesh.faces, (focal, focal), (c, c), (VIEW_SIZE, VIEW_SIZE)
+            )
             out[i, j] = describe(depth > 0, depth, focal)
     return out
 
@@ -167,7 +175,9 @@ class LibraryDescriptors:
 
 
 def _settings() -> bytes:
-    return repr((DESCRIPTOR_VERSION, GRID, MARGIN, list(AZIMUTHS), ELEVATIONS, VIEW_DISTANCE, VIEW_SIZE, BLUR_CELLS)).encode()
+    return repr(
+        (DESCRIPTOR_VERSION, GRID, MARGIN, list(AZIMUTHS), ELEVATIONS, VIEW_DISTANCE, VIEW_SIZE, BLUR_CELLS)
+    ).encode()
 
 
 def asset_key(asset: Asset) -> str:

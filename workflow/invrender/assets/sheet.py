@@ -6,10 +6,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..scene.cameras import look_at
 from ..scene.images import write_png_preview
 from .asset import Asset
 from .primitives import face_normals
-from .raster import look_at_pose, rasterize
+from .raster import rasterize
 
 __all__ = ["thumbnail", "contact_sheet", "write_contact_sheet"]
 
@@ -29,7 +30,7 @@ def thumbnail(asset: Asset, size: int = TILE, azimuth_deg: float = 35.0, elevati
     target = 0.5 * (p.min(axis=0) + p.max(axis=0))
     a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
     eye = target + 3.0 * np.array([np.sin(a) * np.cos(e), np.sin(e), np.cos(a) * np.cos(e)])
-    R, t = look_at_pose(eye, target)
+    R, t = look_at(eye, target)
     radius = 0.5 * np.linalg.norm(p.max(axis=0) - p.min(axis=0))
     focal = 0.45 * size * (3.0 - radius) / radius
     _, face = rasterize(p @ R.T + t, asset.mesh.faces, (focal, focal), (size / 2, size / 2), (size, size))

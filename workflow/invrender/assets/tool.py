@@ -24,13 +24,18 @@ def run(what: str, out=None, user_dirs=(), shots: int = 5, seed: int = 0, cache_
     results = {}
     # The asset in the library; not (its siblings must give the category); the world's up not
     # given (no centring of off-centre objects).
-    for mode, leave_one_out, know_up in (("library", False, True), ("leave_one_out", True, True), ("library_without_up", False, False)):
+    for mode, leave_one_out, know_up in (
+        ("library", False, True),
+        ("leave_one_out", True, True),
+        ("library_without_up", False, False),
+    ):
         start = time.perf_counter()
         found = measure(assets, shots, seed, leave_one_out, cache_dir, know_up)
         found["seconds"] = round(time.perf_counter() - start, 1)
         results[mode] = found
         log.info(
-            "%s: %d queries, category top-1 %.3f top-3 %.3f, asset top-1 %.3f, azimuth median error %s deg, within 30 deg %s (%.1f s)",
+            "%s: %d queries, category top-1 %.3f top-3 %.3f, asset top-1 %.3f, "
+            "azimuth median error %s deg, within 30 deg %s (%.1f s)",
             mode,
             found["queries"],
             found["category_top1"],

@@ -44,7 +44,9 @@ def _stage_to_meters_y_up(stage) -> np.ndarray:
 
 def _triangles(counts: np.ndarray, indices: np.ndarray, path, prim) -> np.ndarray:
     if len(counts) == 0 or counts.min() < 3 or counts.sum() != len(indices):
-        raise SceneError(path, f"{prim} faceVertexCounts", "polygons of at least 3 vertices summing to faceVertexIndices")
+        raise SceneError(
+            path, f"{prim} faceVertexCounts", "polygons of at least 3 vertices summing to faceVertexIndices"
+        )
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     first = np.repeat(starts, counts - 2)
     # Corner j of the fan of polygon k: (start, start + j, start + j + 1), j = 1 .. n - 2.
@@ -94,5 +96,11 @@ def read_usd_parts(path) -> list[tuple[str, np.ndarray, np.ndarray]]:
     out = []
     for name, pieces in parts.items():
         offsets = np.cumsum([0] + [len(p) for p, _ in pieces[:-1]])
-        out.append((name, np.concatenate([p for p, _ in pieces]), np.concatenate([f + o for (_, f), o in zip(pieces, offsets)])))
+        out.append(
+            (
+                name,
+                np.concatenate([p for p, _ in pieces]),
+                np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]),
+            )
+        )
     return out
