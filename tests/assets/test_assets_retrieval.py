@@ -142,3 +142,11 @@ def test_the_contact_sheet_verb(tmp_path):
     sheet = cv2.imread(str(out))
     assert sheet.shape == (9 * (160 + 18), 4 * 160, 3)  # nine categories of four
     assert sheet[:160, :160].max() > 100  # the first thumbnail is drawn
+
+
+def test_without_depth_the_silhouette_decides(cache):
+    shot = photo_shot(furniture("lamp", 0), np.random.default_rng(2))
+    matches = retrieval.retrieve(shot.mask, None, LIBRARY, k=3, focal=shot.focal, up=shot.up, cache_dir=cache)
+    assert matches[0].category == "lamp"
+    with_depth = retrieval.retrieve(shot.mask, shot.depth, LIBRARY, k=1, focal=shot.focal, up=shot.up, cache_dir=cache)
+    assert with_depth[0].distance > matches[0].distance  # the depth half adds its differences

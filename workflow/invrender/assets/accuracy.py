@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from ..scene.cameras import look_at
@@ -59,6 +60,21 @@ def photo_shot(asset: Asset, rng: np.random.Generator) -> Shot:
     return Shot(depth > 0, depth, focal, azimuth, elevation, R[:, 1].copy(), np.degrees(yaw) % 360.0, centre, eye)
 
 
+def damaged(shot: Shot, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The shot as a photo's inputs would give it: the lowest 0-25% of the mask's rows hidden
+    (by a nearer object), its outline moved by a pixel (opened or closed at random), and the
+    depth divided by its median (the paper's normalisation) with 2% multiplicative noise."""
+    mask = shot.mask.copy()
+    rows = np.flatnonzero(mask.any(axis=1))
+    mask[rows[0] + int(np.ceil((1 - rng.uniform(0, 0.25)) * len(rows))) :] = False
+    kernel = np.ones((3, 3), np.uint8)
+    mask = (cv2.erode if rng.random() < 0.5 else cv2.dilate)(mask.astype(np.uint8), kernel) > 0
+    depth = shot.depth / np.median(shot.depth[shot.mask]) * (1 + 0.02 * rng.standard_normal(shot.depth.shape))
+    # A dilated outline takes its depth from the nearest pixel of the object.
+    depth = np.where(shot.mask, depth, cv2.dilate(depth, kernel))
+    return mask, np.where(mask, depth, 0.0)
+
+
 def azimuth_error(estimate: float, truth: float, symmetry: int) -> float | None:
     """Degrees, modulo the asset's symmetry; None for a round asset (any azimuth is right)."""
     if symmetry == 0:
@@ -75,9 +91,12 @@ def measure(
     leave_one_out: bool = False,
     cache_dir=None,
     know_up: bool = True,
+    damage: bool = False,
 ) -> dict:
-    """``know_up``: retrieval is told the world's up (as the room stage knows it from the floor)."""
+    """``know_up``: retrieval is told the world's up (as the room stage knows it from the floor).
+    ``damage``: the query is what a real photo's segmentation and depth give (``damaged``)."""
     rng = np.random.default_rng(seed)
+    harm = np.random.default_rng(seed + 1)  # its own stream: the damaged shots are the same shots
     everything = library_descriptors(assets, cache_dir)
     top1, top3, exact, errors, confusions = [], [], [], [], []
     for index, asset in enumerate(assets):
@@ -86,7 +105,8 @@ def measure(
             shot = photo_shot(asset, rng)
             if shot.mask.sum() < 64:
                 continue  # off the image: not a query a segmentation would give
-            matches = retrieve(shot.mask, shot.depth, library, k=3, focal=shot.focal, up=shot.up if know_up else None)
+            mask, depth = damaged(shot, harm) if damage else (shot.mask, shot.depth)
+            matches = retrieve(mask, depth, library, k=3, focal=shot.focal, up=shot.up if know_up else None)
             top1.append(matches[0].category == asset.category)
             top3.append(any(m.category == asset.category for m in matches))
             exact.append(matches[0].name == asset.name)

@@ -276,7 +276,9 @@ def retrieve(mask, depth, assets, k: int = 5, focal: float | None = None, up=Non
     lib = assets if isinstance(assets, LibraryDescriptors) else library_descriptors(assets, cache_dir)
     half = GRID * GRID
     difference = (lib.views - query) ** 2
-    distances = difference[..., :half].sum(axis=-1) + DEPTH_WEIGHT**2 * difference[..., half:].sum(axis=-1)
+    distances = difference[..., :half].sum(axis=-1)
+    if depth is not None:  # without a depth map the silhouettes alone decide
+        distances += DEPTH_WEIGHT**2 * difference[..., half:].sum(axis=-1)
     best = distances.reshape(len(lib.names), -1).min(axis=1)
     matches = []
     for index in np.argsort(best, kind="stable")[:k]:

@@ -23,14 +23,15 @@ def run(what: str, out=None, user_dirs=(), shots: int = 5, seed: int = 0, cache_
         return None
     results = {}
     # The asset in the library; not (its siblings must give the category); the world's up not
-    # given (no centring of off-centre objects).
-    for mode, leave_one_out, know_up in (
-        ("library", False, True),
-        ("leave_one_out", True, True),
-        ("library_without_up", False, False),
+    # given (no centring of off-centre objects); the query damaged as a photo's would be.
+    for mode, leave_one_out, know_up, damage in (
+        ("library", False, True, False),
+        ("leave_one_out", True, True, False),
+        ("library_without_up", False, False, False),
+        ("library_damaged", False, True, True),
     ):
         start = time.perf_counter()
-        found = measure(assets, shots, seed, leave_one_out, cache_dir, know_up)
+        found = measure(assets, shots, seed, leave_one_out, cache_dir, know_up, damage)
         found["seconds"] = round(time.perf_counter() - start, 1)
         results[mode] = found
         log.info(
