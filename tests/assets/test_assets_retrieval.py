@@ -7,8 +7,8 @@ import pytest
 
 from invrender.assets import retrieval
 from invrender.assets.accuracy import azimuth_error, measure, photo_shot
-from invrender.assets.catalog import library
 from invrender.assets.furniture import furniture
+from invrender.assets.library import library
 from invrender.assets.primitives import box, quad
 from invrender.assets.raster import rasterize, render_depth
 from invrender.cli import main

@@ -9,8 +9,12 @@ renders. A library like render/: no stage, no rule; docs/assets.md.
 """
 
 from .asset import Asset
-from .catalog import library, read_model, user_assets
 from .furniture import CATEGORIES, bundled, furniture
+
+# The function `library` takes the package attribute of its module `library.py` (bound after the
+# module's import, and never re-bound): `assets.library(...)` calls it, and
+# `from invrender.assets.library import library` still finds the module in sys.modules.
+from .library import library, read_model, user_assets
 from .retrieval import Match, library_descriptors, retrieve, yaw_from_view
 
 __all__ = [

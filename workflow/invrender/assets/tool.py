@@ -9,7 +9,7 @@ import time
 
 from ..scene.atomic import atomic_path
 from .accuracy import measure
-from .catalog import library
+from .library import library
 from .sheet import write_contact_sheet
 
 log = logging.getLogger(__name__)

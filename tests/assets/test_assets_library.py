@@ -1,12 +1,12 @@
-"""assets.catalog (assets.library): user folders of OBJ/PLY/USD models beside the bundled furniture; USD
+"""assets.library: user folders of OBJ/PLY/USD models beside the bundled furniture; USD
 transforms, units and up axis applied; one SceneError per unreadable model."""
 
 import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdGeom, UsdShade
 
-from invrender.assets import catalog as lib
 from invrender.assets.furniture import furniture
+from invrender.assets.library import library, user_assets
 from invrender.assets.primitives import signed_volume
 from invrender.scene.types import SceneError
 from invrender.scene.usd_mesh import read_usd_parts
@@ -75,7 +75,7 @@ def folder(tmp_path):
 
 
 def test_user_models_join_the_bundled_furniture(folder):
-    assets = lib.library([folder])
+    assets = library([folder])
     user = {a.name: a for a in assets if a.source != "procedural"}
     root = folder.name
     assert set(user) == {f"{root}/Desk_02", f"{root}/desks/office", f"{root}/desks/scan"}
@@ -115,12 +115,20 @@ def test_usd_transform_units_and_left_handed_winding(tmp_path):
 def test_an_unreadable_model_is_one_scene_error(tmp_path, name, text, field):
     (tmp_path / name).write_text(text)
     with pytest.raises(SceneError) as error:
-        lib.library([tmp_path])
+        library([tmp_path])
     assert name in str(error.value) and field in str(error.value)
+
+
+def test_the_package_attribute_is_the_function():
+    import invrender.assets
+    from invrender.assets.library import library as by_module
+
+    assert invrender.assets.library is by_module is library
+    assert len(invrender.assets.library()) == 36
 
 
 def test_a_folder_without_models(tmp_path):
     with pytest.raises(SceneError, match="at least one model file"):
-        lib.user_assets(tmp_path)
+        user_assets(tmp_path)
     with pytest.raises(SceneError, match="an existing folder"):
-        lib.user_assets(tmp_path / "missing")
+        user_assets(tmp_path / "missing")
