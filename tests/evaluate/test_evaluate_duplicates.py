@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from trimesh.triangles import closest_point
 
+from invrender.assets.primitives import box
 from invrender.cli import main
 from invrender.evaluate import duplicates as dup
 from invrender.evaluate.stage import run_duplicates
@@ -23,7 +24,6 @@ from invrender.scene.mesh_io import write_ply
 from invrender.scene.poses import write_poses
 from invrender.scene.types import Mesh, SceneError
 from invrender.synthesize.duplicates import make_duplicates, object_mesh
-from invrender.synthesize.primitives import box
 
 X, Y, Z = np.eye(3)
 

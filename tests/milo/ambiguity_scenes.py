@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from invrender.assets.primitives import axis_grid, concatenate, subdivide_breaks
 from invrender.render.analysis import analyse
 from invrender.render.renderer import Renderer
 from invrender.scene.atlas import AtlasTexels, rasterize_atlas, unwrap
@@ -22,7 +23,6 @@ from invrender.scene.cameras import pinhole_camera, write_colmap
 from invrender.scene.images import write_exr
 from invrender.scene.mesh_io import write_ply
 from invrender.scene.types import Camera, Maps, Mesh, Scene
-from invrender.synthesize.primitives import axis_grid, concatenate, subdivide_breaks
 from invrender.synthesize.room import Material, bake_materials
 
 BLACK = Material(kd=0.0, ks=0.0, ka=0.3)

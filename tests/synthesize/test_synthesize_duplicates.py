@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
+from invrender.assets.primitives import signed_volume
 from invrender.scene.atlas import texel_index
 from invrender.scene.cameras import project_points
 from invrender.synthesize.duplicates import _label, build_object, make_duplicates, object_mesh
-from invrender.synthesize.primitives import signed_volume
 
 
 @pytest.fixture(scope="module")
@@ -154,6 +154,7 @@ def test_impossible_placement_says_so():
 
 from scipy.spatial import ConvexHull  # noqa: E402
 
+from invrender.assets.primitives import BOX_SIDES  # noqa: E402
 from invrender.synthesize.duplicates import (  # noqa: E402
     DUPLICATES_DEFAULTS,
     DUPLICATES_PRESETS,
@@ -162,7 +163,6 @@ from invrender.synthesize.duplicates import (  # noqa: E402
     convex_gap,
     resolve_config,
 )
-from invrender.synthesize.primitives import BOX_SIDES  # noqa: E402
 from invrender.synthesize.room import merge_config  # noqa: E402
 
 PRESET_NAMES = sorted(DUPLICATES_PRESETS)

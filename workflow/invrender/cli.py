@@ -336,6 +336,12 @@ def cmd_accuracy(args):
     )
 
 
+def cmd_assets(args):
+    from .assets.tool import run
+
+    run(args.what, args.out, args.user, args.shots, args.seed)
+
+
 def cmd_summary(args):
     from .accuracy import summary
 
@@ -628,6 +634,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
     p.set_defaults(func=cmd_accuracy)
+
+    p = stages.add_parser(
+        "assets", help="the asset library: its contact sheet, or retrieval's accuracy on it (docs/assets.md)"
+    )
+    p.add_argument("what", choices=["sheet", "accuracy"])
+    p.add_argument("--out", help="sheet: the PNG to write (default assets.png); accuracy: a JSON of the numbers")
+    p.add_argument(
+        "--user", action="append", default=[], metavar="DIR", help="a folder of OBJ/PLY/USD models (repeatable)"
+    )
+    p.add_argument("--shots", type=int, default=5, help="accuracy: photo-like views of each asset")
+    p.add_argument("--seed", type=int, default=0, help="accuracy: the shots' random seed")
+    p.set_defaults(func=cmd_assets)
 
     p = stages.add_parser("summary", help="a scene's metrics beside the papers' and each rule's time and memory")
     p.add_argument("--results", required=True, help="the scene's results folder (results/{scene})")

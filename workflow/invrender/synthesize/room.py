@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..assets.primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
 from ..scene.atlas import bake, rasterize_atlas, unwrap
 from ..scene.cameras import look_at, pinhole_camera
 from ..scene.cubemap import texel_directions
 from ..scene.types import Camera, Maps, Mesh, Scene
-from .primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
 
 __all__ = [
     "ROOM_DEFAULTS",
