@@ -14,6 +14,7 @@
 #include "pose.h"
 #include "projection.h"
 #include "edges.h"
+#include "part_sums.h"
 
 #define SILHOUETTE_BVH global const float8 *bvh_bounds, global const int8 *bvh_children, \
                        global const float8 *bvh_leaves
@@ -91,74 +92,113 @@ kernel void silhouette_forward(SILHOUETTE_BVH, global const int* slot_label, glo
     depth[pixel] = depth_sum * weight;
 }
 
-/* Interior term, one work-item per camera ray (ray = pixel spp + k, the forward's rays): the
- * hit point rides on its triangle's plane, so along the fixed ray dt = n.V / n.d and the depth
- * t (forward . d) moves with it; labels do not change inside a triangle. Writes the ray's
- * part (-1: none) and its 9 derivatives weighted by dL/ddepth / spp. */
-kernel void silhouette_interior(SILHOUETTE_BVH, global const int* slot_label, global const int* slot_part,
-                                global const float4* tri_v, global const CameraData* cam,
-                                global const float4* velocity, int spp, ulong seed, global const float* adj_depth,
-                                int first_ray, int num_rays, global int* out_part, global float* out_grad)
+/* Interior term of camera ray `ray` (= pixel spp + k, the forward's rays): the hit point rides
+ * on its triangle's plane, so along the fixed ray dt = n.V / n.d, and the depth t (forward . d)
+ * moves with it; labels do not change inside a triangle. Weighted by dL/ddepth / spp. */
+inline PartDerivatives interior_derivatives(const SceneData* s, global const int* slot_label,
+                                            global const int* slot_part, global const float4* tri_v,
+                                            global const CameraData* cam, global const float4* velocity, int spp,
+                                            ulong seed, global const float* adj_depth, int ray)
 {
-    int i = get_global_id(0);
-    if (i >= num_rays)
-        return;
-    int ray = first_ray + i, pixel = ray / spp, k = ray % spp, w = cam->width;
-    SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
-    float2 y = pixel_sample(pixel % w, pixel / w, k, spp, seed, pixel);
-    Primary p = trace_primary(&s, cam, slot_label, y.x, y.y);
+    PartDerivatives r = no_derivatives();
+    int pixel = ray / spp, k = ray % spp, w = cam->width;
     float adjoint = adj_depth[pixel] / (float)spp;
-    out_part[i] = p.hit.slot >= 0 && adjoint != 0.0f ? slot_part[p.hit.slot] : -1;
-    if (out_part[i] < 0)
-        return;
+    if (adjoint == 0.0f)
+        return r;
+    float2 y = pixel_sample(pixel % w, pixel / w, k, spp, seed, pixel);
+    Primary p = trace_primary(s, cam, slot_label, y.x, y.y);
+    if (p.hit.slot < 0)
+        return r;
+    r.part = slot_part[p.hit.slot];
     float3 v0 = tri_vertex(tri_v, p.hit.slot, 0), v1 = tri_vertex(tri_v, p.hit.slot, 1);
     float3 n = cross(v1 - v0, tri_vertex(tri_v, p.hit.slot, 2) - v0);
     float3 x = camera_center(cam) + p.hit.t * p.d;
     float scale = adjoint * (p.depth / p.hit.t) / dot(n, p.d); /* dL/ddepth (forward . d) / n.d */
     for (int j = 0; j < POSE_PARAMS; ++j)
-        out_grad[POSE_PARAMS * i + j] = scale * dot(n, pose_velocity(velocity, out_part[i], j, x));
+        r.d[j] = scale * dot(n, pose_velocity(velocity, r.part, j, x));
+    return r;
 }
 
-/* Boundary term, one work-item per edge sample: a point on a listed edge, drawn by projected
- * length (pdf 1 / total_length), counts where the edge is seen (nothing closer along its ray).
- * Moving the edge by delta along n turns a strip of the "+" side into the "-" side, so
- * dI = (f(-) - f(+)) (n . dy/dtheta) per unit length; f on either side from a ray offset by
- * eps pixels. Writes the sample's part (-1: none) and its 9 adjoint-weighted derivatives,
- * already divided by pdf and the number of samples. */
-kernel void silhouette_boundary(SILHOUETTE_BVH, global const int* slot_label, global const CameraData* cam,
-                                global const float4* velocity, global const float4* edge_a,
-                                global const float4* edge_b, global const float4* edge_pixels,
-                                global const int* edge_part, global const float* edge_cdf, int num_edges,
-                                float total_length, int num_samples, float eps, ulong seed, int num_labels,
-                                global const float* adj_masks, global const float* adj_depth, int first_sample,
-                                int count, global int* out_part, global float* out_grad)
+/* Boundary term of edge sample i: a point on a listed edge, drawn by projected length (pdf
+ * 1 / total_length), counts where the edge is seen (nothing closer along its ray). Moving the
+ * edge by delta along n turns a strip of the "+" side into the "-" side, so
+ * dI = (f(-) - f(+)) (n . dy/dtheta) per unit length; f on either side from a ray offset by eps
+ * pixels. Already divided by the pdf and the number of samples. */
+inline PartDerivatives boundary_derivatives(const SceneData* s, global const int* slot_label,
+                                            global const CameraData* cam, global const float4* velocity,
+                                            global const float4* edge_a, global const float4* edge_b,
+                                            global const float4* edge_pixels, global const int* edge_part,
+                                            global const float* edge_cdf, int num_edges, float total_length,
+                                            int num_samples, float eps, ulong seed, int num_labels,
+                                            global const float* adj_masks, global const float* adj_depth, int i)
 {
-    int i = get_global_id(0);
-    if (i >= count)
-        return;
-    out_part[i] = -1;
-    float4 u = rng_uniform4(seed, (uint)(first_sample + i), 0u, 0u, RNG_BLOCK_CAMERA);
+    PartDerivatives r = no_derivatives();
+    float4 u = rng_uniform4(seed, (uint)i, 0u, 0u, RNG_BLOCK_CAMERA);
     EdgeSample e = sample_edge(edge_a, edge_b, edge_pixels, edge_part, edge_cdf, num_edges, u.x, u.y);
     int px = (int)floor(e.y.x), py = (int)floor(e.y.y);
     if (px < 0 || py < 0 || px >= cam->width || py >= cam->height)
-        return;
+        return r;
     int pixel = py * cam->width + px, num_pixels = cam->width * cam->height;
-    SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
     /* seen: nothing along the ray through y before the edge point (relative slack for float) */
     float3 c = camera_center(cam);
-    Ray r = make_ray(c, camera_direction(cam, e.y.x, e.y.y));
-    if (bvh_closest_hit(&s, &r, 0.999f * length(e.x - c), -1).slot >= 0)
-        return;
-    Primary minus = trace_primary(&s, cam, slot_label, e.y.x - eps * e.n.x, e.y.y - eps * e.n.y);
-    Primary plus = trace_primary(&s, cam, slot_label, e.y.x + eps * e.n.x, e.y.y + eps * e.n.y);
+    Ray ray = make_ray(c, camera_direction(cam, e.y.x, e.y.y));
+    if (bvh_closest_hit(s, &ray, 0.999f * length(e.x - c), -1).slot >= 0)
+        return r;
+    Primary minus = trace_primary(s, cam, slot_label, e.y.x - eps * e.n.x, e.y.y - eps * e.n.y);
+    Primary plus = trace_primary(s, cam, slot_label, e.y.x + eps * e.n.x, e.y.y + eps * e.n.y);
     float jump = label_adjoint(adj_masks, num_labels, minus.label, pixel, num_pixels) -
                  label_adjoint(adj_masks, num_labels, plus.label, pixel, num_pixels) +
                  adj_depth[pixel] * (minus.depth - plus.depth);
     if (jump == 0.0f)
-        return;
-    out_part[i] = e.part;
+        return r;
+    r.part = e.part;
     float weight = jump * total_length / (float)num_samples;
     for (int j = 0; j < POSE_PARAMS; ++j)
-        out_grad[POSE_PARAMS * i + j] =
-            weight * dot(e.n, project_velocity(cam, e.x, pose_velocity(velocity, e.part, j, e.x)));
+        r.d[j] = weight * dot(e.n, project_velocity(cam, e.x, pose_velocity(velocity, e.part, j, e.x)));
+    return r;
+}
+
+/* The two backward entries: work-group g takes samples [first + g rounds G, + rounds G), one
+ * per work-item and round, and writes its sums by part (part_sums.h) to out[g]. */
+kernel void silhouette_interior(SILHOUETTE_BVH, global const int* slot_label, global const int* slot_part,
+                                global const float4* tri_v, global const CameraData* cam,
+                                global const float4* velocity, int num_parts, int spp, ulong seed,
+                                global const float* adj_depth, int first, int count, int rounds,
+                                local float* table, local int* parts, local float* values, global float* out)
+{
+    SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
+    part_sums_clear(table, num_parts);
+    int base = get_group_id(0) * rounds * get_local_size(0) + get_local_id(0);
+    for (int round = 0; round < rounds; ++round) {
+        int i = base + round * get_local_size(0);
+        PartDerivatives r = i < count ? interior_derivatives(&s, slot_label, slot_part, tri_v, cam, velocity, spp,
+                                                             seed, adj_depth, first + i)
+                                      : no_derivatives();
+        part_sums_add(table, parts, values, r);
+    }
+    part_sums_write(table, num_parts, out);
+}
+
+kernel void silhouette_boundary(SILHOUETTE_BVH, global const int* slot_label, global const CameraData* cam,
+                                global const float4* velocity, int num_parts, global const float4* edge_a,
+                                global const float4* edge_b, global const float4* edge_pixels,
+                                global const int* edge_part, global const float* edge_cdf, int num_edges,
+                                float total_length, int num_samples, float eps, ulong seed, int num_labels,
+                                global const float* adj_masks, global const float* adj_depth, int first,
+                                int count, int rounds, local float* table, local int* parts,
+                                local float* values, global float* out)
+{
+    SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
+    part_sums_clear(table, num_parts);
+    int base = get_group_id(0) * rounds * get_local_size(0) + get_local_id(0);
+    for (int round = 0; round < rounds; ++round) {
+        int i = base + round * get_local_size(0);
+        PartDerivatives r = i < count ? boundary_derivatives(&s, slot_label, cam, velocity, edge_a, edge_b,
+                                                             edge_pixels, edge_part, edge_cdf, num_edges,
+                                                             total_length, num_samples, eps, seed, num_labels,
+                                                             adj_masks, adj_depth, first + i)
+                                      : no_derivatives();
+        part_sums_add(table, parts, values, r);
+    }
+    part_sums_write(table, num_parts, out);
 }

@@ -30,7 +30,9 @@ from .program import build_program
 from .scene_buffers import pack_cameras
 
 POSE_PARAMS = 9  # kernels/pose.h
-RAYS_PER_LAUNCH = 1 << 20  # interior rays / edge samples per launch: bounds the per-sample output
+RAYS_PER_LAUNCH = 1 << 21  # interior rays / edge samples per launch: keeps launches short on GPUs
+GROUP = 64  # kernels/part_sums.h PART_SUMS_GROUP: work-items per group
+ROUNDS = 16  # samples per work-item: a group sums GROUP x ROUNDS samples into one table
 EDGE_EPS = 1e-3  # pixels: the offset of the two side rays of an edge sample
 NEAR = 1e-6  # near clipping plane of the edges, relative to the parts' extent in camera space
 
@@ -151,7 +153,8 @@ class PosedScene:
         self.tri_v[:, :3] = all_tris[order].reshape(-1, 3)
         self.slot_label = self.labels[order] if len(order) else np.full(1, -1, np.int32)
         self.slot_part = self.part_of[order] if len(order) else np.full(1, -1, np.int32)
-        self.velocity = np.stack([velocity_fields(q) for q in self.params]).astype(np.float32).reshape(-1, 4)
+        fields = [velocity_fields(q) for q in self.params] or [np.zeros((POSE_PARAMS, 3, 4))]
+        self.velocity = np.stack(fields).astype(np.float32).reshape(-1, 4)
 
 
 def edge_candidates(posed: PosedScene) -> dict:
@@ -290,56 +293,65 @@ class SilhouetteKernels:
         cl.enqueue_copy(self.queue, depth, depth_buf)
         return masks, depth
 
-    def _reduce(self, launch, total: int, parts: int) -> np.ndarray:
-        """Sum the per-sample (part, 9 derivatives) records of `launch(first, count, part_buf,
-        grad_buf)` over batches of RAYS_PER_LAUNCH into (P, 9), in float64."""
+    def _part_sums(self, launch, total: int, parts: int) -> np.ndarray:
+        """(P, 9) float64: the sums by part of `total` samples' derivatives, from launches
+        `launch(global_size, first, count, local_args, out)` of a kernel that sums ROUNDS
+        samples per work-item in its group's local memory (kernels/part_sums.h) and writes one
+        (P, 9) table per group."""
+        local_bytes = 4 * (parts * POSE_PARAMS + GROUP * (1 + POSE_PARAMS))
+        if local_bytes > self.context.devices[0].local_mem_size:
+            raise ValueError(f"render_masks_depth: {parts} parts need {local_bytes} bytes of local memory per group")
+        local_args = (
+            cl.LocalMemory(4 * parts * POSE_PARAMS),
+            cl.LocalMemory(4 * GROUP),
+            cl.LocalMemory(4 * GROUP * POSE_PARAMS),
+        )
+        per_group = GROUP * ROUNDS
         grad = np.zeros((parts, POSE_PARAMS))
-        batch = min(total, RAYS_PER_LAUNCH)
-        if batch == 0:
+        batch = min(-(-total // per_group), -(-RAYS_PER_LAUNCH // per_group)) * per_group
+        if total == 0:
             return grad
-        part_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, 4 * batch)
-        grad_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, 4 * POSE_PARAMS * batch)
-        part, records = np.empty(batch, np.int32), np.empty((batch, POSE_PARAMS), np.float32)
+        out = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, 4 * (batch // per_group) * parts * POSE_PARAMS)
         for first in range(0, total, batch):
             count = min(batch, total - first)
-            launch(first, count, part_buf, grad_buf)
-            cl.enqueue_copy(self.queue, part, part_buf)
-            cl.enqueue_copy(self.queue, records, grad_buf)
-            hit = part[:count] >= 0
-            for j in range(POSE_PARAMS):
-                grad[:, j] += np.bincount(part[:count][hit], records[:count, j][hit].astype(np.float64), parts)
+            groups = -(-count // per_group)
+            launch((groups * GROUP,), first, count, local_args, out)
+            tables = np.empty((groups, parts, POSE_PARAMS), np.float32)
+            cl.enqueue_copy(self.queue, tables, out)
+            grad += tables.sum(0, dtype=np.float64)
         return grad
 
     def interior(self, posed: PosedScene, dev: dict, spp: int, seed: int, adj_depth: np.ndarray) -> np.ndarray:
         adj = self.buffer(adj_depth.astype(np.float32))
-        num_rays = adj_depth.size * spp
+        parts = len(posed.parts)
 
-        def launch(first, count, part_buf, grad_buf):
+        def launch(size, first, count, local_args, out):
             self.interior_kernel(
-                self.queue, (count,), None, *dev["bvh"], dev["slot_label"], dev["slot_part"], dev["tri_v"],
-                dev["camera"], dev["velocity"], np.int32(spp), np.uint64(seed), adj, np.int32(first),
-                np.int32(count), part_buf, grad_buf,
+                self.queue, size, (GROUP,), *dev["bvh"], dev["slot_label"], dev["slot_part"], dev["tri_v"],
+                dev["camera"], dev["velocity"], np.int32(parts), np.int32(spp), np.uint64(seed), adj,
+                np.int32(first), np.int32(count), np.int32(ROUNDS), *local_args, out,
             )  # fmt: skip
 
-        return self._reduce(launch, num_rays, len(posed.parts))
+        return self._part_sums(launch, adj_depth.size * spp, parts)
 
     def boundary(self, posed, dev, samples: int, seed: int, adj_masks: np.ndarray, adj_depth: np.ndarray):
         edges = edge_candidates(posed)
+        parts = len(posed.parts)
         if edges["count"] == 0 or samples == 0:
-            return np.zeros((len(posed.parts), POSE_PARAMS))
+            return np.zeros((parts, POSE_PARAMS))
         e = {name: self.buffer(edges[name]) for name in ("edge_a", "edge_b", "edge_pixels", "edge_part", "edge_cdf")}
         adj_m, adj_d = self.buffer(adj_masks.astype(np.float32)), self.buffer(adj_depth.astype(np.float32))
 
-        def launch(first, count, part_buf, grad_buf):
+        def launch(size, first, count, local_args, out):
             self.boundary_kernel(
-                self.queue, (count,), None, *dev["bvh"], dev["slot_label"], dev["camera"], dev["velocity"],
-                e["edge_a"], e["edge_b"], e["edge_pixels"], e["edge_part"], e["edge_cdf"],
+                self.queue, size, (GROUP,), *dev["bvh"], dev["slot_label"], dev["camera"], dev["velocity"],
+                np.int32(parts), e["edge_a"], e["edge_b"], e["edge_pixels"], e["edge_part"], e["edge_cdf"],
                 np.int32(edges["count"]), np.float32(edges["total_length"]), np.int32(samples),
                 np.float32(EDGE_EPS), np.uint64(seed), np.int32(adj_masks.shape[0]), adj_m, adj_d,
-                np.int32(first), np.int32(count), part_buf, grad_buf,
+                np.int32(first), np.int32(count), np.int32(ROUNDS), *local_args, out,
             )  # fmt: skip
 
-        return self._reduce(launch, samples, len(posed.parts))
+        return self._part_sums(launch, samples, parts)
 
 
 _KERNELS: dict = {}
