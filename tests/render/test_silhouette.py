@@ -236,6 +236,31 @@ def test_box_mask_gradients_match_the_exact_coverage_derivative():
     assert_agrees(grads.mean(0), truth, se)
 
 
+def test_bad_arguments_are_refused_with_what_was_expected():
+    part = box_part()
+    with pytest.raises(ValueError, match=r"expected a \(1, 9\) tensor, got \(1, 7\)"):
+        render_masks_depth([part], torch.zeros(1, 7), camera(), labels=1)
+    distorted = camera()
+    distorted.model, distorted.params = "OPENCV", np.array([50.0, 50.0, 20.0, 15.0, 0.1, 0, 0, 0])
+    with pytest.raises(ValueError, match="distorted"):
+        render_masks_depth([part], torch.zeros(1, 9), distorted, labels=1)
+    with pytest.raises(ValueError, match="face indices"):
+        MeshPart(part.vertices, part.faces + 8, part.face_labels)
+
+
+def test_float32_params_get_float32_gradients_and_unused_outputs_count_zero():
+    """The room stage may optimise in float32 and use only the masks: the depth's adjoint is
+    then None, the gradient the masks' alone, in the parameters' dtype."""
+    params = torch.tensor([BOX_POSE], dtype=torch.float32, requires_grad=True)
+    masks, depth = render_masks_depth([box_part()], params, camera(), labels=1, spp=4, seed=0)
+    assert masks.dtype == depth.dtype == torch.float32
+    masks.sum().backward()
+    assert params.grad.dtype == torch.float32 and params.grad[0, :3].abs().max() > 0
+    # translation along the view axis shrinks the silhouette: its area falls as the box recedes
+    forward = torch.tensor(camera().R[2], dtype=torch.float32)
+    assert (params.grad[0, :3] @ forward).item() < 0
+
+
 # --- backward: against finite differences ----------------------------------------------------
 
 BOX_POSE = [0.1, 0.0, 0.0, 0.2, 0.5, 0.1, 0.0, -0.2, 0.1]
