@@ -28,15 +28,23 @@ def room_camera(width, height):
 def agreement():
     every = lambda parts: [(i, j) for i in range(parts) for j in range(9)]
     cases = {
-        "box with label edges": ([T.box_part(labels_by_axis=[0, 0, 1, 1, 0, 0])], [T.BOX_POSE], T.camera(), 2, every(1)),
+        "box with label edges": (
+            [T.box_part(labels_by_axis=[0, 0, 1, 1, 0, 0])],
+            [T.BOX_POSE],
+            T.camera(),
+            2,
+            every(1),
+        ),
         "box in front of another": ([T.box_part(0), T.box_part(0)], OCCLUSION, T.camera(), 1, every(2)),
         "room box from inside": ([T.room_part()], [ROOM_POSE], room_camera(T.W, T.H), 3, every(1)),
     }
     for name, args in cases.items():
         g, fd, se = T.check_against_fd(*args)
         z, rel = (g - fd) / se, np.abs(g - fd) / np.abs(fd)
-        print(f"{name}: {len(g)} derivatives, max |z| {np.abs(z).max():.2f}, median relative difference "
-              f"{100 * np.median(rel):.2f} % (max {100 * rel.max():.2f} %)")
+        print(
+            f"{name}: {len(g)} derivatives, max |z| {np.abs(z).max():.2f}, median relative difference "
+            f"{100 * np.median(rel):.2f} % (max {100 * rel.max():.2f} %)"
+        )
 
 
 def timing(spp=16):
@@ -60,8 +68,10 @@ def timing(spp=16):
             t3 = time.perf_counter()
             k.boundary(posed, dev, samples, 1, np.ones((4, height, width)), np.ones((height, width)))
             t4 = time.perf_counter()
-        print(f"{width} x {height}, spp {spp}: pose + BVH + upload {t1 - t0:.2f} s, forward {t2 - t1:.2f} s, "
-              f"interior {t3 - t2:.2f} s, boundary {t4 - t3:.2f} s ({samples} edge samples)")
+        print(
+            f"{width} x {height}, spp {spp}: pose + BVH + upload {t1 - t0:.2f} s, forward {t2 - t1:.2f} s, "
+            f"interior {t3 - t2:.2f} s, boundary {t4 - t3:.2f} s ({samples} edge samples)"
+        )
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ pixel into the next, so a step of a fraction of a pixel has only its O(h^2) bias
 import numpy as np
 import pytest
 import torch
+from test_gpu_compile import NO_FP64, TARGETS, clang
 
 from invrender.render.silhouette import (
     MeshPart,
@@ -19,7 +20,6 @@ from invrender.render.silhouette import (
     rotation_matrix,
 )
 from invrender.scene.cameras import pinhole_camera, project_points
-from test_gpu_compile import NO_FP64, TARGETS, clang
 
 W, H = 40, 30
 SIGMAS = 4.0  # the assertion: |gradient - finite difference| within this many standard errors
@@ -69,7 +69,9 @@ def loss(parts, params, camera, labels, weights, spp, seed, grad, edge_samples=N
     return p.grad.numpy()
 
 
-def check_against_fd(parts, params, camera, labels, entries, h=0.005, fd_spp=256, seeds=8, spp=64, edge_samples=200_000):
+def check_against_fd(
+    parts, params, camera, labels, entries, h=0.005, fd_spp=256, seeds=8, spp=64, edge_samples=200_000
+):
     """Mean and standard error over seeds of the gradient (spp, edge_samples) and of the central
     finite difference (fd_spp, common random numbers for +h and -h) of the entries (part, param).
     h moves the edges by a fraction of a pixel: the derivative of a pixel-discrete image varies
@@ -138,7 +140,7 @@ def test_box_depth_is_the_plane_depth():
     part = box_part(labels_by_axis=[0, 1, 2, 3, 4, 5])
     masks, depth = render_masks_depth([part], torch.tensor(pose[None]), cam, labels=6, spp=256, seed=0)
     R = rotation_matrix(pose[3:6])
-    C, fwd = cam.center, cam.R[2]
+    C = cam.center
     n_sub = 8
     sub = (np.arange(n_sub) + 0.5) / n_sub
     checked = 0
@@ -172,12 +174,13 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     """Andrew's monotone chain, counter-clockwise in (x, y)."""
     pts = sorted(map(tuple, points))
 
+    def turns_left(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]) > 0
+
     def chain(seq):
         out = []
         for q in seq:
-            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (q[1] - out[-2][1]) - (out[-1][1] - out[-2][1]) * (
-                q[0] - out[-2][0]
-            ) <= 0:
+            while len(out) >= 2 and not turns_left(out[-2], out[-1], q):
                 out.pop()
             out.append(q)
         return out[:-1]

@@ -415,6 +415,8 @@ def render_masks_depth(
         got = tuple(params.shape) if isinstance(params, torch.Tensor) else type(params).__name__
         raise ValueError(f"render_masks_depth: params: expected a ({len(parts)}, 9) tensor, got {got}")
     _check_camera(camera)
+    if camera.width * camera.height * spp >= 2**31:  # the kernels number rays with int
+        raise ValueError(f"render_masks_depth: {camera.width} x {camera.height} x {spp} spp rays: expected < 2^31")
     if edge_samples is None:
         edge_samples = 64 * spp * (camera.width + camera.height)
     return MasksDepth.apply(params, parts, camera, int(labels), int(spp), int(seed), int(edge_samples), device)
