@@ -1,18 +1,19 @@
 #line 2 "part_sums.h"
 /* Sums of per-sample derivatives by part, in a work-group's local memory: each sample adds its
- * POSE_PARAMS derivatives to the row of the part it moves with (a sample touches one part),
- * and each group writes its table, num_parts x POSE_PARAMS floats, for the host to add up.
- * No atomics: per round every work-item leaves its sample in local memory and POSE_PARAMS
- * work-items add them up, one column each. The group size is PART_SUMS_GROUP (the host's). */
+ * POSE_PARAMS derivatives to the row of the part it moves with (a sample touches one part), and
+ * each group writes its table, num_parts x POSE_PARAMS floats, for the host to add up.
+ * A work-item takes consecutive samples (the rays of one pixel, mostly one part), sums them in
+ * private while the part stays the same and adds that sum to the table when it changes, with a
+ * compare-and-swap float add on local memory (core OpenCL 1.1 atomics, no extension). No
+ * barrier inside the sample loop: PoCL runs a group's work-items one after another between
+ * barriers, and a barrier in a loop makes it save every work-item's state each round. */
 #ifndef INVRENDER_PART_SUMS_H
 #define INVRENDER_PART_SUMS_H
 
 #include "pose.h"
 
-#define PART_SUMS_GROUP 64
-
 typedef struct {
-    int part; /* -1: the sample adds nothing */
+    int part; /* -1: nothing */
     float d[POSE_PARAMS];
 } PartDerivatives;
 
@@ -32,23 +33,42 @@ inline void part_sums_clear(local float* table, int num_parts)
     barrier(CLK_LOCAL_MEM_FENCE);
 }
 
-/* Every work-item of the group calls this once per round, with its sample's derivatives. */
-inline void part_sums_add(local float* table, local int* parts, local float* values, PartDerivatives r)
+inline void local_float_add(volatile local float* p, float v)
 {
-    int lid = get_local_id(0), n = get_local_size(0);
-    parts[lid] = r.part;
-    for (int j = 0; j < POSE_PARAMS; ++j)
-        values[POSE_PARAMS * lid + j] = r.d[j];
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (lid < POSE_PARAMS)
-        for (int k = 0; k < n; ++k)
-            if (parts[k] >= 0)
-                table[POSE_PARAMS * parts[k] + lid] += values[POSE_PARAMS * k + lid];
-    barrier(CLK_LOCAL_MEM_FENCE);
+    union {
+        uint u;
+        float f;
+    } seen, want;
+    do {
+        seen.f = *p;
+        want.f = seen.f + v;
+    } while (atomic_cmpxchg((volatile local uint*)p, seen.u, want.u) != seen.u);
 }
 
+inline void part_sums_flush(local float* table, PartDerivatives* sum)
+{
+    if (sum->part >= 0)
+        for (int j = 0; j < POSE_PARAMS; ++j)
+            local_float_add(table + POSE_PARAMS * sum->part + j, sum->d[j]);
+    *sum = no_derivatives();
+}
+
+inline void part_sums_add(local float* table, PartDerivatives* sum, PartDerivatives r)
+{
+    if (r.part < 0)
+        return;
+    if (r.part != sum->part) {
+        part_sums_flush(table, sum);
+        sum->part = r.part;
+    }
+    for (int j = 0; j < POSE_PARAMS; ++j)
+        sum->d[j] += r.d[j];
+}
+
+/* After every work-item's last flush. */
 inline void part_sums_write(local const float* table, int num_parts, global float* out)
 {
+    barrier(CLK_LOCAL_MEM_FENCE);
     global float* mine = out + get_group_id(0) * num_parts * POSE_PARAMS;
     for (int k = get_local_id(0); k < num_parts * POSE_PARAMS; k += get_local_size(0))
         mine[k] = table[k];

@@ -158,24 +158,22 @@ inline PartDerivatives boundary_derivatives(const SceneData* s, global const int
     return r;
 }
 
-/* The two backward entries: work-group g takes samples [first + g rounds G, + rounds G), one
- * per work-item and round, and writes its sums by part (part_sums.h) to out[g]. */
+/* The two backward entries: work-item g takes samples [first + g rounds, + rounds) and its
+ * group sums them by part (part_sums.h) into out[group]. */
 kernel void silhouette_interior(SILHOUETTE_BVH, global const int* slot_label, global const int* slot_part,
                                 global const float4* tri_v, global const CameraData* cam,
                                 global const float4* velocity, int num_parts, int spp, ulong seed,
                                 global const float* adj_depth, int first, int count, int rounds,
-                                local float* table, local int* parts, local float* values, global float* out)
+                                local float* table, global float* out)
 {
     SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
     part_sums_clear(table, num_parts);
-    int base = get_group_id(0) * rounds * get_local_size(0) + get_local_id(0);
-    for (int round = 0; round < rounds; ++round) {
-        int i = base + round * get_local_size(0);
-        PartDerivatives r = i < count ? interior_derivatives(&s, slot_label, slot_part, tri_v, cam, velocity, spp,
-                                                             seed, adj_depth, first + i)
-                                      : no_derivatives();
-        part_sums_add(table, parts, values, r);
-    }
+    PartDerivatives sum = no_derivatives();
+    int begin = get_global_id(0) * rounds, end = min(begin + rounds, count);
+    for (int i = begin; i < end; ++i)
+        part_sums_add(table, &sum, interior_derivatives(&s, slot_label, slot_part, tri_v, cam, velocity, spp, seed,
+                                                        adj_depth, first + i));
+    part_sums_flush(table, &sum);
     part_sums_write(table, num_parts, out);
 }
 
@@ -185,20 +183,16 @@ kernel void silhouette_boundary(SILHOUETTE_BVH, global const int* slot_label, gl
                                 global const int* edge_part, global const float* edge_cdf, int num_edges,
                                 float total_length, int num_samples, float eps, ulong seed, int num_labels,
                                 global const float* adj_masks, global const float* adj_depth, int first,
-                                int count, int rounds, local float* table, local int* parts,
-                                local float* values, global float* out)
+                                int count, int rounds, local float* table, global float* out)
 {
     SceneData s = geometry_only(bvh_bounds, bvh_children, bvh_leaves);
     part_sums_clear(table, num_parts);
-    int base = get_group_id(0) * rounds * get_local_size(0) + get_local_id(0);
-    for (int round = 0; round < rounds; ++round) {
-        int i = base + round * get_local_size(0);
-        PartDerivatives r = i < count ? boundary_derivatives(&s, slot_label, cam, velocity, edge_a, edge_b,
-                                                             edge_pixels, edge_part, edge_cdf, num_edges,
-                                                             total_length, num_samples, eps, seed, num_labels,
-                                                             adj_masks, adj_depth, first + i)
-                                      : no_derivatives();
-        part_sums_add(table, parts, values, r);
-    }
+    PartDerivatives sum = no_derivatives();
+    int begin = get_global_id(0) * rounds, end = min(begin + rounds, count);
+    for (int i = begin; i < end; ++i)
+        part_sums_add(table, &sum, boundary_derivatives(&s, slot_label, cam, velocity, edge_a, edge_b, edge_pixels,
+                                                        edge_part, edge_cdf, num_edges, total_length, num_samples,
+                                                        eps, seed, num_labels, adj_masks, adj_depth, first + i));
+    part_sums_flush(table, &sum);
     part_sums_write(table, num_parts, out);
 }

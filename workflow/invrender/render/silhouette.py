@@ -31,8 +31,8 @@ from .scene_buffers import pack_cameras
 
 POSE_PARAMS = 9  # kernels/pose.h
 RAYS_PER_LAUNCH = 1 << 21  # interior rays / edge samples per launch: keeps launches short on GPUs
-GROUP = 64  # kernels/part_sums.h PART_SUMS_GROUP: work-items per group
-ROUNDS = 16  # samples per work-item: a group sums GROUP x ROUNDS samples into one table
+GROUP = 64  # work-items per group, each of which sums one table (kernels/part_sums.h)
+ROUNDS = 16  # consecutive samples per work-item: a group sums GROUP x ROUNDS samples
 EDGE_EPS = 1e-3  # pixels: the offset of the two side rays of an edge sample
 NEAR = 1e-6  # near clipping plane of the edges, relative to the parts' extent in camera space
 
@@ -295,17 +295,13 @@ class SilhouetteKernels:
 
     def _part_sums(self, launch, total: int, parts: int) -> np.ndarray:
         """(P, 9) float64: the sums by part of `total` samples' derivatives, from launches
-        `launch(global_size, first, count, local_args, out)` of a kernel that sums ROUNDS
-        samples per work-item in its group's local memory (kernels/part_sums.h) and writes one
-        (P, 9) table per group."""
-        local_bytes = 4 * (parts * POSE_PARAMS + GROUP * (1 + POSE_PARAMS))
+        `launch(global_size, first, count, local_args, out)` of a kernel whose work-items take
+        ROUNDS consecutive samples each and whose groups sum them in local memory
+        (kernels/part_sums.h), one (P, 9) table per group."""
+        local_bytes = 4 * parts * POSE_PARAMS
         if local_bytes > self.context.devices[0].local_mem_size:
             raise ValueError(f"render_masks_depth: {parts} parts need {local_bytes} bytes of local memory per group")
-        local_args = (
-            cl.LocalMemory(4 * parts * POSE_PARAMS),
-            cl.LocalMemory(4 * GROUP),
-            cl.LocalMemory(4 * GROUP * POSE_PARAMS),
-        )
+        local_args = (cl.LocalMemory(local_bytes),)
         per_group = GROUP * ROUNDS
         grad = np.zeros((parts, POSE_PARAMS))
         batch = min(-(-total // per_group), -(-RAYS_PER_LAUNCH // per_group)) * per_group
