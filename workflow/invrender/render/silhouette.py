@@ -157,26 +157,30 @@ class PosedScene:
         self.velocity = np.stack(fields).astype(np.float32).reshape(-1, 4)
 
 
-def edge_candidates(posed: PosedScene) -> dict:
+def jump_edges(posed: PosedScene) -> tuple[np.ndarray, np.ndarray]:
     """The edges where the integrand may jump, as seen from the camera: mesh boundaries,
-    silhouettes (the two faces on opposite sides of the camera) and edges between two labels;
-    clipped to the near plane and then to the image, in float64. Returns the kernel's edge
-    buffers (end points with their camera z, their pixels, part, cdf) and the total length."""
-    cam = posed.camera
-    R, t, C = np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64), cam.center
-    ends, part_ids = [], []
+    silhouettes (_folded) and edges between two labels. (E, 2, 3) world end points, (E,) part."""
+    ends, part_ids = [np.zeros((0, 2, 3))], [np.zeros(0, np.int64)]
     for index, (part, world) in enumerate(zip(posed.parts, posed.world)):
         edges, faces = part.edges
-        if not len(edges):
-            continue
         manifold = faces[:, 0] >= 0
         f0, f1 = np.maximum(faces[:, 0], 0), np.maximum(faces[:, 1], 0)
-        jump = ~manifold | _folded(world, part.faces, edges, f0, f1, C) | (part.face_labels[f0] != part.face_labels[f1])
+        folded = _folded(world, part.faces, edges, f0, f1, posed.camera.center)
+        jump = ~manifold | folded | (part.face_labels[f0] != part.face_labels[f1])
         ends.append(world[edges[jump]])
         part_ids.append(np.full(int(jump.sum()), index))
-    if not ends:
+    return np.concatenate(ends), np.concatenate(part_ids)
+
+
+def edge_candidates(posed: PosedScene) -> dict:
+    """The jump edges clipped to the near plane and then to the image, in float64: the kernel's
+    edge buffers (end points with their camera z, their pixels, part, cdf by projected length)
+    and the total length."""
+    cam = posed.camera
+    R, t = np.asarray(cam.R, np.float64), np.asarray(cam.t, np.float64)
+    ends, part_ids = jump_edges(posed)
+    if not len(ends):
         return {"count": 0}
-    ends, part_ids = np.concatenate(ends), np.concatenate(part_ids)
     X = ends @ R.T + t  # (E, 2, 3) camera space
     near = NEAR * max(float(np.abs(X).max()), 1e-30)
     X, part_ids = _clip_near(X, part_ids, near)
