@@ -64,7 +64,8 @@ COMMON_PARAMS = (
 
 @dataclass(frozen=True)
 class Transform:
-    """p = scale * R(-rotation_deg) @ uv + offset (module docstring)."""
+    """p = scale * R(-rotation_deg) @ uv + offset (module docstring). `scale` may be a torch
+    scalar, so that a fit can refine it."""
 
     scale: float = 1.0
     rotation_deg: float = 0.0
@@ -135,8 +136,15 @@ class Material:
         the top (largest v), as the atlas maps are stored (scene/atlas.py)."""
         width = height if width is None else width
         uv = pixel_uvs(height, width)
-        kd, _, _ = self.evaluate(uv.reshape(-1, 2), params, transform, footprint=transform.scale / width)
+        kd, _, _ = self.evaluate(uv.reshape(-1, 2), params, transform, footprint=float(transform.scale) / width)
         return kd.reshape(height, width, 3)
+
+
+def mean_albedo(material: Material, params=None, size: int = 128, repeats: int = 16) -> torch.Tensor:
+    """The material's mean kd (3,) over `repeats` whole periods each way: its colour as seen from
+    afar, independent of where a crop cuts the pattern (a checker crop of 3.5 squares is not
+    half and half)."""
+    return material.image(size, params, Transform(scale=float(repeats))).mean(dim=(0, 1))
 
 
 def pixel_uvs(height: int, width: int) -> torch.Tensor:
