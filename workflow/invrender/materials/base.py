@@ -120,8 +120,11 @@ class Material:
     def evaluate(self, uv, params=None, transform: Transform = Transform(), footprint: float = 0.0):
         """kd (N, 3), ks (N,), ka (N,) at UV points uv (N, 2). `footprint` is the size of a
         sample in material units (a pixel or texel): pattern edges are blurred over at least
-        that much, so that a pattern finer than the sampling does not alias."""
-        uv = torch.as_tensor(uv, dtype=DTYPE)
+        that much, so that a pattern finer than the sampling does not alias. Computed in float32,
+        or in float64 if uv is (then pass float64 parameters too)."""
+        uv = torch.as_tensor(uv)
+        if uv.dtype != torch.float64:  # float64 stays (the finite-difference tests use it)
+            uv = uv.to(DTYPE)
         P = self.complete(params)
         p = transform.apply(uv)
         kd = torch.clamp(self.albedo(p, P, float(footprint)), 0.0, 1.0)

@@ -11,7 +11,8 @@ from .fields import soft_step
 def square_wave(x: torch.Tensor, footprint: float) -> torch.Tensor:
     """0 on [0, 0.5), 1 on [0.5, 1) of each unit, its edges blurred over `footprint` (plus a
     floor, so that the edges stay differentiable under a shift)."""
-    tri = 2.0 * torch.abs(x - torch.floor(x) - 0.5)  # 1 at integers, 0 at half-integers
+    shifted = x + 0.25
+    tri = 2.0 * torch.abs(shifted - torch.floor(shifted) - 0.5)  # 0 at x = 1/4, 1 at x = 3/4
     return 1.0 - soft_step(tri, 0.5, max(2.0 * footprint, 0.02))
 
 

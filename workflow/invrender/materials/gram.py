@@ -19,6 +19,7 @@ the colour). VGG19 sees the crop as in the paper (sRGB, ImageNet-normalised).
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import torch
@@ -115,7 +116,7 @@ def load_network(weights=None) -> nn.Module:
     path = Path(weights)
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
-    except (OSError, RuntimeError, EOFError, ValueError) as error:
+    except (OSError, RuntimeError, EOFError, ValueError, pickle.UnpicklingError) as error:
         raise SceneError(path, "weights", f"a torch state dict readable by torch.load ({error})") from None
     if not isinstance(state, dict):
         raise SceneError(path, "weights", "a state dict (a dict of tensors)")

@@ -2,8 +2,8 @@
 
 The fibres run along material x; the rings cross y once per unit, bent by Perlin fBm
 (`distortion`, in ring widths). Within a ring the wood darkens gradually from the early wood
-(`light`) to the late wood (`dark`) over its last `latewood` fraction, then changes abruptly at
-the next ring, as a tree grows. `grain` is the amplitude of fibre streaks (fBm stretched 12:1)."""
+(`light`) to the late wood (`dark`) over its last `latewood` fraction, then changes within a
+small `edge` at the next ring, as a tree grows. `grain` is the amplitude of fibre streaks (fBm stretched 12:1)."""
 
 from __future__ import annotations
 
@@ -31,6 +31,9 @@ class Wood(Material):
         warp = fbm(p * _RING_WARP.to(p.dtype), octaves=3, basis=perlin_noise, salt=5)
         t = p[:, 1] + 2.0 * P["distortion"] * warp
         phase = t - torch.floor(t)
-        ring = smoothstep(1.0 - P["latewood"], 1.0, phase)[:, None]
+        # The late wood ends within the ring's last `edge` (a sharp but continuous drop: a jump
+        # would alias, and its position's derivative would be lost to autograd).
+        edge = max(footprint, 0.03)
+        ring = (smoothstep(1.0 - P["latewood"], 1.0 - edge, phase) * (1.0 - smoothstep(1.0 - edge, 1.0, phase)))[:, None]
         streak = fbm(p * _GRAIN_STRETCH.to(p.dtype), octaves=3, basis=perlin_noise, salt=9)
         return torch.lerp(P["light"], P["dark"], ring) * (1.0 + 2.0 * P["grain"] * streak)[:, None]
