@@ -31,18 +31,18 @@ def perturbed_params(preset, rng, amount: float = 0.15) -> dict[str, torch.Tenso
     return params
 
 
-def random_transform(rng) -> Transform:
-    lo, hi = SCALE_RANGE
+def random_transform(rng, scale_range=SCALE_RANGE) -> Transform:
+    lo, hi = scale_range
     scale = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
     rotation = float(rng.choice(ROTATIONS) + rng.uniform(-JITTER_DEG, JITTER_DEG))
     return Transform(scale, rotation, tuple(float(o) for o in rng.uniform(0, 10, 2)))
 
 
-def synthetic_crop(preset, rng, size: int = 64, perturb: bool = True):
+def synthetic_crop(preset, rng, size: int = 64, perturb: bool = True, scale_range=SCALE_RANGE):
     """(crop (size, size, 3) float32, true params, true transform): the material's kd under a
     random transform, times a linear lighting gradient, plus pixel noise."""
     truth = perturbed_params(preset, rng) if perturb else preset.params()
-    transform = random_transform(rng)
+    transform = random_transform(rng, scale_range)
     with torch.no_grad():
         kd = preset.type.image(size, truth, transform).numpy()
     ramp = np.linspace(-1, 1, size)

@@ -37,8 +37,10 @@ SCALES = tuple(0.5 * 2 ** (k / 2) for k in range(9))
 ROTATIONS = (-45.0, 0.0, 45.0, 90.0)
 CROP_SIZE = 64
 # Contrast below this fraction of the mean luminance is noise, not texture: a plain crop is not
-# amplified into one (its structure stays nearly flat, as the plain preset's).
-_CONTRAST_FLOOR = 0.05
+# amplified into one (its structure stays nearly flat, as the plain preset's). At 0.05, pixel
+# noise of 0.01 on a dark plain crop (mean 0.3) was amplified into a pattern nearer a fine
+# checker than flat (measured); at 0.1 it stays flat.
+_CONTRAST_FLOOR = 0.1
 # The structure image's contrast: the Gram network's reference (gram._REFERENCE_STD).
 _STRUCTURE_STD = 0.1
 
@@ -92,8 +94,15 @@ def structure(images: torch.Tensor) -> torch.Tensor:
     return grey[:, None].expand(-1, 3, -1, -1)
 
 
+# The library's crops start here in material space: every type has pattern edges at integer
+# coordinates (checker squares, tile rows, wood rings, weave cells), so a crop from 0.75 shows
+# one even at scale 0.5, where a crop from 0 would show half a checker square, flat as plain
+# (measured: a plain crop then came out a checker at scale 0.5).
+LIBRARY_OFFSET = (0.75, 0.75)
+
+
 def transform_grid(scales=SCALES, rotations=ROTATIONS) -> list[Transform]:
-    return [Transform(scale=s, rotation_deg=r) for s in scales for r in rotations]
+    return [Transform(scale=s, rotation_deg=r, offset=LIBRARY_OFFSET) for s in scales for r in rotations]
 
 
 _LIBRARY_CACHE: dict = {}
