@@ -12,6 +12,7 @@ from ..scene.images import read_image
 from ..scene.types import SceneError
 from .fit import fit
 from .gram import load_network
+from .library import PRESETS, preset
 from .retrieval import retrieve
 from .thumbnails import write_contact_sheet
 
@@ -26,7 +27,13 @@ def _match(args) -> dict:
     if crop.shape[2] != 3:
         raise SceneError(args.crop, "channels", f"an RGB crop, got {crop.shape[2]} channel(s)")
     net = load_network(args.weights)
-    matches = retrieve(crop, net=net)
+    presets = PRESETS
+    if args.presets:
+        try:
+            presets = [preset(name) for name in args.presets.split(",")]
+        except KeyError as error:
+            raise SceneError("--presets", "name", str(error.args[0])) from None
+    matches = retrieve(crop, presets, net=net)
     best = matches[0]
     result = fit(best.preset.type, best.preset.params(), best.transform, crop, steps=args.steps, net=net)
     return {
@@ -54,6 +61,7 @@ def main(argv=None) -> int:
     match.add_argument("--steps", type=int, default=80, help="Adam steps of the parameter fit")
     match.add_argument("--top", type=int, default=5, help="how many ranked presets to print")
     match.add_argument("--weights", help="a state dict of the Gram network or of torchvision's VGG19")
+    match.add_argument("--presets", help="comma-separated preset names to choose among (default: the whole library)")
     match.set_defaults(run=_match)
     args = parser.parse_args(argv)
     try:

@@ -139,7 +139,8 @@ class Material:
         the top (largest v), as the atlas maps are stored (scene/atlas.py)."""
         width = height if width is None else width
         uv = pixel_uvs(height, width)
-        kd, _, _ = self.evaluate(uv.reshape(-1, 2), params, transform, footprint=float(transform.scale) / width)
+        footprint = float(torch.as_tensor(transform.scale).detach()) / width
+        kd, _, _ = self.evaluate(uv.reshape(-1, 2), params, transform, footprint)
         return kd.reshape(height, width, 3)
 
 
