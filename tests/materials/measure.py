@@ -1,6 +1,6 @@
 """Measures retrieval, the transform search and the fit on synthetic crops (docs/materials.md):
 
-    PYTHONPATH=workflow python tests/materials/measure.py [crops per preset] [fit steps] [seed]
+PYTHONPATH=workflow python tests/materials/measure.py [crops per preset] [fit steps] [seed]
 """
 
 from __future__ import annotations
@@ -37,8 +37,13 @@ def measure(per_preset: int = 3, steps: int = 60, seed: int = 0, presets=PRESETS
             t0 = time.perf_counter()
             best = retrieve(crop)[0]
             t1 = time.perf_counter()
-            row = {"preset": preset.name, "material": preset.material, "found": best.preset.name,
-                   "type_ok": best.preset.material == preset.material, "retrieve_s": t1 - t0}
+            row = {
+                "preset": preset.name,
+                "material": preset.material,
+                "found": best.preset.name,
+                "type_ok": best.preset.material == preset.material,
+                "retrieve_s": t1 - t0,
+            }
             if row["type_ok"]:
                 row["scale_octaves"] = abs(math.log2(best.transform.scale / transform.scale))
                 symmetry = SYMMETRY[preset.material]
@@ -68,8 +73,9 @@ def summary(rows, library_seconds) -> str:
         f"{col('colour_init').max():.4f} max -> fit {np.median(col('colour_fit')):.4f} median / "
         f"{col('colour_fit').max():.4f} max",
         f"loss ratio fit/initial median {np.median(col('loss_fit') / col('loss_init')):.3f}",
-        f"seconds: library descriptors {library_seconds:.1f}, retrieval {np.median([r['retrieve_s'] for r in rows]):.2f} "
-        f"median per crop, fit {np.median(col('fit_s')):.2f} median",
+        f"seconds: library descriptors {library_seconds:.1f}, "
+        f"retrieval {np.median([r['retrieve_s'] for r in rows]):.2f} median per crop, "
+        f"fit {np.median(col('fit_s')):.2f} median",
     ]
     misses = [f"{r['preset']}->{r['found']}" for r in rows if not r["type_ok"]]
     if misses:

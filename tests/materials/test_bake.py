@@ -18,8 +18,22 @@ def floor_mesh():
     """A 2 m x 1 m floor (y = 0) as two 1 m squares, each its own chart in the atlas (left and
     right halves of UV space, with a gutter between), and a wall quad (a third chart) at x = 3."""
     positions = np.array(
-        [[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1], [1, 0, 0], [2, 0, 0], [2, 0, 1], [1, 0, 1],
-         [3, 0, 0], [3, 1, 0], [3, 1, 1], [3, 0, 1]], np.float32)
+        [
+            [0, 0, 0],
+            [1, 0, 0],
+            [1, 0, 1],
+            [0, 0, 1],
+            [1, 0, 0],
+            [2, 0, 0],
+            [2, 0, 1],
+            [1, 0, 1],
+            [3, 0, 0],
+            [3, 1, 0],
+            [3, 1, 1],
+            [3, 0, 1],
+        ],
+        np.float32,
+    )
     faces = np.array([[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6], [8, 9, 10], [8, 10, 11]], np.int32)
     square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32) * 0.4
     uvs = np.concatenate([square + [0.05, 0.05], square + [0.55, 0.05], square + [0.05, 0.55]]).astype(np.float32)

@@ -34,7 +34,9 @@ def test_match_prints_a_ranking_and_a_fit(tmp_path, capsys):
     path = tmp_path / "crop.exr"
     write_exr(path, crop)
     # three presets keep the library's descriptors to 108 renders (test_retrieval_fit has all)
-    assert main(["match", str(path), "--steps", "3", "--top", "3", "--presets", "plain_grey,tiles_brick,checker_bw"]) == 0
+    assert (
+        main(["match", str(path), "--steps", "3", "--top", "3", "--presets", "plain_grey,tiles_brick,checker_bw"]) == 0
+    )
     result = json.loads(capsys.readouterr().out)
     assert result["material"] == "tiles" and result["ranking"][0]["preset"] == "tiles_brick"
     assert len(result["ranking"]) == 3 and len(result["params"]["tile_colour"]) == 3

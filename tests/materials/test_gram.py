@@ -69,8 +69,11 @@ def test_user_vgg19_weights_load_by_torchvision_keys(tmp_path):
     fetched), classifier keys included, loads into VGG19Features: five pooling layers of 64 to
     512 channels, a zero loss for a crop against itself and a positive one against another."""
     g = torch.Generator().manual_seed(3)
-    state = {k: torch.randn(v.shape, generator=g) * 0.05 for k, v in VGG19Features().state_dict().items()
-             if k.startswith("features.")}
+    state = {
+        k: torch.randn(v.shape, generator=g) * 0.05
+        for k, v in VGG19Features().state_dict().items()
+        if k.startswith("features.")
+    }
     state["classifier.0.weight"] = torch.zeros(4, 4)
     path = tmp_path / "vgg19.pth"
     torch.save(state, path)
@@ -89,8 +92,11 @@ def test_user_vgg19_weights_load_by_torchvision_keys(tmp_path):
     "content, field",
     [
         ({"convs.0.weight": torch.zeros(3)}, "keys"),
-        ({f"convs.{i}.{k}": v for i, conv in enumerate(RandomGramNet().convs) for k, v in conv.state_dict().items()}
-         | {"convs.0.weight": torch.zeros(32, 3, 5, 5)}, "convs.0.weight"),
+        (
+            {f"convs.{i}.{k}": v for i, conv in enumerate(RandomGramNet().convs) for k, v in conv.state_dict().items()}
+            | {"convs.0.weight": torch.zeros(32, 3, 5, 5)},
+            "convs.0.weight",
+        ),
         ([1, 2, 3], "weights"),
     ],
 )

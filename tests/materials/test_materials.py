@@ -36,8 +36,10 @@ def test_every_texture_parameter_gradient_matches_finite_differences(name):
     w = torch.rand((512, 3), generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     # values drawn inside 20-80 % of each range (two colours drawn alike would hide each other)
     rng = np.random.default_rng(2)
-    mid = {p.name: p.tensor(p.low + (p.high - p.low) * rng.uniform(0.2, 0.8, 3 if p.is_colour else None)).double()
-           for p in m.params}
+    mid = {
+        p.name: p.tensor(p.low + (p.high - p.low) * rng.uniform(0.2, 0.8, 3 if p.is_colour else None)).double()
+        for p in m.params
+    }
     transform = Transform(1.3, 20.0, (0.2, 0.7))
 
     def objective(params):

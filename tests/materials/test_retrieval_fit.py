@@ -64,5 +64,7 @@ def test_fit_recovers_the_mean_colour(name):
     assert after <= floor + 0.01, (before, after, floor)
     assert result.losses[-1] < 0.4 * result.losses[0], result.losses
     # only the texture parameters moved; the transform's scale stayed in its grid cell
-    assert float(result.params["roughness"]) == pytest.approx(0.5) and float(result.params["specular"]) == pytest.approx(0.04)
+    assert float(result.params["roughness"]) == pytest.approx(0.5) and float(
+        result.params["specular"]
+    ) == pytest.approx(0.04)
     assert abs(math.log2(result.transform.scale / nearest)) <= 0.25 + 1e-6

@@ -37,13 +37,22 @@ def _match(args) -> dict:
     best = matches[0]
     result = fit(best.preset.type, best.preset.params(), best.transform, crop, steps=args.steps, net=net)
     return {
-        "ranking": [{"preset": m.preset.name, "material": m.preset.material, "distance": m.distance,
-                     "transform": m.transform.as_dict()} for m in matches[: args.top]],
+        "ranking": [
+            {
+                "preset": m.preset.name,
+                "material": m.preset.material,
+                "distance": m.distance,
+                "transform": m.transform.as_dict(),
+            }
+            for m in matches[: args.top]
+        ],
         "material": best.preset.material,
         "params": result.values(),
         "transform": result.transform.as_dict(),
-        "loss": {"initial": result.losses[0] if result.losses else None,
-                 "final": result.losses[-1] if result.losses else None},
+        "loss": {
+            "initial": result.losses[0] if result.losses else None,
+            "final": result.losses[-1] if result.losses else None,
+        },
         "seconds": result.seconds,
     }
 

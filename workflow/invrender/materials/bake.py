@@ -61,14 +61,26 @@ def texel_coordinates(texels: AtlasTexels, faces=None, plane=None, meters_per_un
     return TexelCoordinates(selected, covered, uv.astype(np.float32))
 
 
-def evaluate_texels(coords: TexelCoordinates, material: Material, params=None, transform: Transform = Transform(),
-                    footprint: float = 0.0):
+def evaluate_texels(
+    coords: TexelCoordinates,
+    material: Material,
+    params=None,
+    transform: Transform = Transform(),
+    footprint: float = 0.0,
+):
     """kd (n, 3), ks (n,), ka (n,) at the selected texels, differentiable in `params`."""
     return material.evaluate(torch.from_numpy(coords.uv), params, transform, footprint)
 
 
-def bake_maps(maps, coords: TexelCoordinates, material: Material, params=None, transform: Transform = Transform(),
-              dilation: int = 2, footprint: float = 0.0):
+def bake_maps(
+    maps,
+    coords: TexelCoordinates,
+    material: Material,
+    params=None,
+    transform: Transform = Transform(),
+    dilation: int = 2,
+    footprint: float = 0.0,
+):
     """A copy of `maps` (an Atlas or Maps) with kd, ks (grey) and ka of the material written at the
     selected texels and grown `dilation` texels into the gutter; other texels are unchanged."""
     with torch.no_grad():

@@ -50,7 +50,9 @@ class Param:
         value = self.default if value is None else value
         t = torch.as_tensor(value, dtype=DTYPE).clone()
         if t.shape != ((3,) if self.is_colour else ()):
-            raise ValueError(f"parameter {self.name}: expected {'an RGB triple' if self.is_colour else 'a number'}, got {value!r}")
+            raise ValueError(
+                f"parameter {self.name}: expected {'an RGB triple' if self.is_colour else 'a number'}, got {value!r}"
+            )
         return t
 
 
@@ -133,7 +135,9 @@ class Material:
         ka = torch.clamp(P["roughness"] ** 2, min=KA_MIN).expand(n)
         return kd, ks, ka
 
-    def image(self, height: int, params=None, transform: Transform = Transform(), width: int | None = None) -> torch.Tensor:
+    def image(
+        self, height: int, params=None, transform: Transform = Transform(), width: int | None = None
+    ) -> torch.Tensor:
         """kd as an image (height, width, 3) whose width spans one UV unit (a crop's width is
         the unit its transform's scale counts repetitions in), pixel centres sampled, row 0 at
         the top (largest v), as the atlas maps are stored (scene/atlas.py)."""

@@ -9,8 +9,8 @@ Parameters move in logit coordinates of their bounds, so every step stays inside
 transform's scale is refined with them, within the search grid's cell (a factor 2^(1/4) either
 way, through a tanh): the grid leaves it up to that far off, and a pattern at the wrong scale
 cannot match a crop's Gram matrices whatever its colours; unbounded, the Gram loss's local minima
-pulled it off by octaves (measured: a wood crop at scale 3.4 went from 2.8 to 0.9). Rotation and offset stay: the Gram loss does not see the offset, and the
-rotation's grid is the paper's.
+pulled it off by octaves (measured: a wood crop at scale 3.4 went from 2.8 to 0.9). Rotation
+and offset stay: the Gram loss does not see the offset, and the rotation's grid is the paper's.
 """
 
 from __future__ import annotations

@@ -126,11 +126,17 @@ def load_network(weights=None) -> nn.Module:
         if all(k in state for k in keys):
             wrong = [k for k in keys if tuple(state[k].shape) != tuple(own[k].shape)]
             if wrong:
-                raise SceneError(path, wrong[0], f"shape {tuple(own[wrong[0]].shape)}, got {tuple(state[wrong[0]].shape)}")
+                raise SceneError(
+                    path, wrong[0], f"shape {tuple(own[wrong[0]].shape)}, got {tuple(state[wrong[0]].shape)}"
+                )
             net.load_state_dict({k: state[k] for k in keys}, strict=False)
             return _normalised(net)
-    raise SceneError(path, "keys", "the state dict of invrender's random Gram network (convs.N.weight) "
-                     "or of torchvision's VGG19 (features.N.weight)")
+    raise SceneError(
+        path,
+        "keys",
+        "the state dict of invrender's random Gram network (convs.N.weight) "
+        "or of torchvision's VGG19 (features.N.weight)",
+    )
 
 
 def _normalised(net: nn.Module) -> nn.Module:
@@ -140,7 +146,7 @@ def _normalised(net: nn.Module) -> nn.Module:
     g = torch.Generator().manual_seed(RANDOM_SEED + 1)
     noise = 0.5 + _REFERENCE_STD * torch.randn((1, 3, _REFERENCE_SIZE, _REFERENCE_SIZE), generator=g)
     with torch.no_grad():
-        net.layer_norms = [float((gram ** 2).sum()) for gram in gram_matrices(net, noise)]
+        net.layer_norms = [float((gram**2).sum()) for gram in gram_matrices(net, noise)]
     return net
 
 

@@ -40,17 +40,37 @@ PRESETS: tuple[Preset, ...] = (
     Preset("plain_grey", "plain"),
     Preset("checker_bw", "checker"),
     Preset("tiles_square", "tiles", {"tile_colour": (0.75, 0.75, 0.72), "grout_colour": (0.35, 0.35, 0.33)}),
-    Preset("tiles_brick", "tiles", {"tile_colour": (0.45, 0.15, 0.08), "grout_colour": (0.5, 0.48, 0.45),
-                                     "aspect": 2.0, "bond": 0.5, "variation": 0.3}, Transform(scale=3.0)),
+    Preset(
+        "tiles_brick",
+        "tiles",
+        {
+            "tile_colour": (0.45, 0.15, 0.08),
+            "grout_colour": (0.5, 0.48, 0.45),
+            "aspect": 2.0,
+            "bond": 0.5,
+            "variation": 0.3,
+        },
+        Transform(scale=3.0),
+    ),
     Preset("wood_oak", "wood"),
-    Preset("wood_walnut", "wood", {"light": (0.3, 0.17, 0.09), "dark": (0.12, 0.06, 0.03), "grain": 0.35,
-                                    "distortion": 0.7}),
+    Preset(
+        "wood_walnut",
+        "wood",
+        {"light": (0.3, 0.17, 0.09), "dark": (0.12, 0.06, 0.03), "grain": 0.35, "distortion": 0.7},
+    ),
     Preset("fabric_denim", "fabric", {"warp": (0.06, 0.1, 0.25), "weft": (0.55, 0.55, 0.55)}, Transform(scale=6.0)),
-    Preset("fabric_linen", "fabric", {"warp": (0.6, 0.55, 0.45), "weft": (0.55, 0.5, 0.4), "fuzz": 0.3,
-                                       "thread_width": 0.9}, Transform(scale=6.0)),
+    Preset(
+        "fabric_linen",
+        "fabric",
+        {"warp": (0.6, 0.55, 0.45), "weft": (0.55, 0.5, 0.4), "fuzz": 0.3, "thread_width": 0.9},
+        Transform(scale=6.0),
+    ),
     Preset("noise_stone", "noise"),
-    Preset("noise_plaster", "noise", {"colour_a": (0.75, 0.72, 0.68), "colour_b": (0.6, 0.58, 0.55),
-                                       "persistence": 0.65, "value_mix": 0.6}),
+    Preset(
+        "noise_plaster",
+        "noise",
+        {"colour_a": (0.75, 0.72, 0.68), "colour_b": (0.6, 0.58, 0.55), "persistence": 0.65, "value_mix": 0.6},
+    ),
 )
 
 

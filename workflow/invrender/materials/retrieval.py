@@ -18,7 +18,6 @@ it. Crops are area-downsampled to at most `CROP_SIZE` pixels before anything els
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +28,17 @@ from .base import DTYPE, Transform, single_thread
 from .gram import descriptor, load_network
 from .library import PRESETS, Preset
 
-__all__ = ["SCALES", "ROTATIONS", "CROP_SIZE", "Match", "prepare_crop", "remove_shading", "structure", "transform_grid", "retrieve"]
+__all__ = [
+    "SCALES",
+    "ROTATIONS",
+    "CROP_SIZE",
+    "Match",
+    "prepare_crop",
+    "remove_shading",
+    "structure",
+    "transform_grid",
+    "retrieve",
+]
 
 # The paper's ranges: scales 0.5-8 (here a geometric grid, two steps per octave, so the nearest
 # grid scale is within a factor 2^(1/4) = 1.19 of any scale in range), rotations -45, 0, 45, 90.
@@ -72,7 +81,9 @@ def remove_shading(images: torch.Tensor) -> torch.Tensor:
     within the crop has almost no linear trend, so it stays."""
     b, h, w, _ = images.shape
     lum = images @ torch.as_tensor(REC709, dtype=images.dtype)
-    y, x = torch.meshgrid(torch.linspace(-1, 1, h, dtype=images.dtype), torch.linspace(-1, 1, w, dtype=images.dtype), indexing="ij")
+    y, x = torch.meshgrid(
+        torch.linspace(-1, 1, h, dtype=images.dtype), torch.linspace(-1, 1, w, dtype=images.dtype), indexing="ij"
+    )
     # 1, x and y are orthogonal on the symmetric grid: each coefficient is a projection.
     mean = lum.mean(dim=(1, 2), keepdim=True)
     slope_x = (lum * x).sum(dim=(1, 2), keepdim=True) / (x * x).sum()

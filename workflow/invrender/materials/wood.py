@@ -34,6 +34,8 @@ class Wood(Material):
         # The late wood ends within the ring's last `edge` (a sharp but continuous drop: a jump
         # would alias, and its position's derivative would be lost to autograd).
         edge = max(footprint, 0.03)
-        ring = (smoothstep(1.0 - P["latewood"], 1.0 - edge, phase) * (1.0 - smoothstep(1.0 - edge, 1.0, phase)))[:, None]
+        ring = (smoothstep(1.0 - P["latewood"], 1.0 - edge, phase) * (1.0 - smoothstep(1.0 - edge, 1.0, phase)))[
+            :, None
+        ]
         streak = fbm(p * _GRAIN_STRETCH.to(p.dtype), octaves=3, basis=perlin_noise, salt=9)
         return torch.lerp(P["light"], P["dark"], ring) * (1.0 + 2.0 * P["grain"] * streak)[:, None]
