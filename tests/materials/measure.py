@@ -25,6 +25,15 @@ from invrender.materials.retrieval import retrieve  # noqa: E402
 SYMMETRY = {"plain": None, "noise": None, "checker": 90.0, "tiles": 180.0, "wood": 180.0, "fabric": 180.0}
 
 
+def parameter_error(material, params, truth) -> float:
+    """Mean |difference| of the texture parameters in units of their ranges (each colour
+    channel one term)."""
+    errors = [
+        ((params[p.name] - truth[p.name]).abs() / (p.high - p.low)).reshape(-1) for p in material.params if p.texture
+    ]
+    return float(torch.cat(errors).mean())
+
+
 def measure(per_preset: int = 3, steps: int = 60, seed: int = 0, presets=PRESETS):
     rng = np.random.default_rng(seed)
     rows = []
@@ -53,6 +62,8 @@ def measure(per_preset: int = 3, steps: int = 60, seed: int = 0, presets=PRESETS
                 true_colour = mean_albedo(preset.type, truth)
                 row["colour_init"] = float((mean_albedo(preset.type, best.preset.params()) - true_colour).abs().max())
                 row["colour_fit"] = float((mean_albedo(preset.type, result.params) - true_colour).abs().max())
+                row["param_init"] = parameter_error(preset.type, best.preset.params(), truth)
+                row["param_fit"] = parameter_error(preset.type, result.params, truth)
                 row["loss_init"], row["loss_fit"] = result.losses[0], result.losses[-1]
                 row["fit_s"] = result.seconds
             rows.append(row)
@@ -72,6 +83,8 @@ def summary(rows, library_seconds) -> str:
         f"mean albedo error (max channel) preset {np.median(col('colour_init')):.4f} median / "
         f"{col('colour_init').max():.4f} max -> fit {np.median(col('colour_fit')):.4f} median / "
         f"{col('colour_fit').max():.4f} max",
+        f"texture parameter error (mean, fraction of range) preset {np.median(col('param_init')):.4f} median -> "
+        f"fit {np.median(col('param_fit')):.4f} median",
         f"loss ratio fit/initial median {np.median(col('loss_fit') / col('loss_init')):.3f}",
         f"seconds: library descriptors {library_seconds:.1f}, "
         f"retrieval {np.median([r['retrieve_s'] for r in rows]):.2f} median per crop, "

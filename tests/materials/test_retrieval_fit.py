@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from crops import synthetic_crop
+from measure import parameter_error
 
 from invrender.materials import PRESETS, Transform, preset
 from invrender.materials.base import mean_albedo
@@ -42,8 +43,14 @@ def test_shading_removal_keeps_the_mean_and_flattens_a_gradient():
     assert np.allclose(flat.mean(axis=(0, 1)), 0.4, atol=2e-3)
 
 
-@pytest.mark.parametrize("name", ["checker_bw", "wood_oak", "noise_stone", "fabric_denim"])
-def test_fit_recovers_the_mean_colour(name):
+# Measured texture-parameter error (mean |fit - truth| in units of each range) after the fit,
+# from 0.047, 0.079, 0.071, 0.080 at the preset: 0.028, 0.061, 0.078, 0.041. The noise's does not
+# fall: persistence, value_mix and contrast trade against each other under the Gram loss.
+PARAMETER_FLOORS = {"checker_bw": 0.035, "wood_oak": 0.075, "noise_stone": 0.09, "fabric_denim": 0.05}
+
+
+@pytest.mark.parametrize("name", sorted(PARAMETER_FLOORS))
+def test_fit_recovers_the_mean_colour_and_parameters(name):
     """From the preset's defaults at the grid transform nearest the truth (the search's job,
     tested above), 40 Adam steps on a 48-pixel crop of scale 2-6 (a crop of fewer periods has a
     mean off its material's: part of a wood ring, a few tiles of random brightness, and the fit
@@ -62,9 +69,20 @@ def test_fit_recovers_the_mean_colour(name):
     after = float((mean_albedo(p.type, result.params) - mean_albedo(p.type, truth)).abs().max())
     floor = float((p.type.image(48, truth, transform).mean(dim=(0, 1)) - mean_albedo(p.type, truth)).abs().max())
     assert after <= floor + 0.01, (before, after, floor)
+    assert parameter_error(p.type, result.params, truth) <= PARAMETER_FLOORS[name]
     assert result.losses[-1] < 0.4 * result.losses[0], result.losses
     # only the texture parameters moved; the transform's scale stayed in its grid cell
     assert float(result.params["roughness"]) == pytest.approx(0.5) and float(
         result.params["specular"]
     ) == pytest.approx(0.04)
     assert abs(math.log2(result.transform.scale / nearest)) <= 0.25 + 1e-6
+
+
+def test_fit_divides_the_light_out():
+    """A plain crop of radiance 2 x (0.3, 0.2, 0.1) under gain 2 fits the albedo (0.3, 0.2, 0.1)
+    (within 5e-3: Adam's steps of 0.05 in logit coordinates move a blue of 0.1 by up to 0.0045)."""
+    crop = np.broadcast_to(np.float32([0.6, 0.4, 0.2]), (32, 32, 3)).copy()
+    plain = preset("plain_grey")
+    result = fit(plain.type, plain.params(), Transform(1.0), crop, steps=100, gain=2.0, fit_scale=False)
+    assert np.allclose(result.params["colour"].numpy(), [0.3, 0.2, 0.1], atol=5e-3), result.params["colour"]
+    assert result.transform.scale == 1.0
