@@ -105,5 +105,5 @@ def fit(
             losses.append(loss.item())
         with torch.no_grad():
             result = {k: v.detach() for k, v in current().items()}
-    fitted = Transform(float(scale()), transform.rotation_deg, transform.offset)
+    fitted = Transform(float(scale().detach()), transform.rotation_deg, transform.offset)
     return FitResult(result, fitted, losses, time.perf_counter() - start)
