@@ -9,7 +9,7 @@ from scipy.ndimage import binary_dilation
 from invrender.materials import Transform, material
 from invrender.materials.bake import bake_maps, evaluate_texels, texel_coordinates
 from invrender.scene.atlas import rasterize_atlas
-from invrender.scene.types import Atlas, Mesh
+from invrender.scene.types import Atlas, Maps, Mesh
 
 A, B = np.array([0.8, 0.6, 0.4]), np.array([0.1, 0.2, 0.3])
 
@@ -76,6 +76,15 @@ def test_gutter_is_grown_and_other_materials_untouched(texels):
     # nothing lands more than 2 texels from a floor chart
     near = binary_dilation(coords.selected, np.ones((3, 3), bool), iterations=2)
     assert not np.any(gutter & ~near)
+    assert np.all(before.kd == 0.5)  # the input is not written
+
+
+def test_maps_with_a_sky_bake_alike(texels):
+    before = Maps.uniform((64, 64), kd=0.5, kg=0.7)
+    coords = texel_coordinates(texels, faces=[4, 5])
+    maps = bake_maps(before, coords, material("plain"), {"colour": (0.1, 0.2, 0.3)})
+    assert isinstance(maps, Maps) and np.all(maps.kg == 0.7) and maps.kg is not before.kg
+    assert np.allclose(maps.kd[coords.selected], [0.1, 0.2, 0.3])
 
 
 def test_plane_coordinates_and_differentiable_texels(texels):

@@ -85,7 +85,7 @@ def bake_maps(
     selected texels and grown `dilation` texels into the gutter; other texels are unchanged."""
     with torch.no_grad():
         kd, ks, ka = (t.numpy() for t in evaluate_texels(coords, material, params, transform, footprint))
-    out = dataclasses.replace(maps, **{k: getattr(maps, k).copy() for k in ("kd", "ks", "ka")})
+    out = dataclasses.replace(maps, **{f.name: getattr(maps, f.name).copy() for f in dataclasses.fields(maps)})
     writable = coords.selected | ~coords.covered
     for name, values in (("kd", kd), ("ks", np.repeat(ks[:, None], 3, axis=1)), ("ka", ka)):
         target = getattr(out, name)

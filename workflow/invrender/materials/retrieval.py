@@ -122,7 +122,8 @@ _LIBRARY_CACHE: dict = {}
 def _library_descriptors(presets, net, height: int, width: int, transforms) -> torch.Tensor:
     """(presets, transforms, D) structure descriptors of every preset under every transform,
     kept per crop size and network (they do not depend on the crop)."""
-    key = (tuple(p.name for p in presets), id(net), height, width, tuple(transforms))
+    # the network itself, not its id: a freed network's id can be reused by another's
+    key = (tuple(p.name for p in presets), net, height, width, tuple(transforms))
     if key not in _LIBRARY_CACHE:
         rows = []
         with torch.no_grad():
