@@ -11,8 +11,8 @@ Conventions:
   repetitions fit in one UV unit and the pattern appears turned by `rotation` degrees
   counter-clockwise (u right, v up).
 - Parameters are a dict name -> torch tensor (shape (3,) for colours, () for scalars), every one
-  differentiable; `Param.low`/`high` bound them (kd + ks <= 1 holds at every bound: colours
-  <= 0.9, specular <= 0.08).
+  differentiable; `Param.low`/`high` bound them. kd is capped at 1 - specular, so kd + ks <= 1
+  (the energy bound) whatever a pattern's brightening does.
 """
 
 from __future__ import annotations
@@ -129,7 +129,9 @@ class Material:
             uv = uv.to(DTYPE)
         P = self.complete(params)
         p = transform.apply(uv)
-        kd = torch.clamp(self.albedo(p, P, float(footprint)), 0.0, 1.0)
+        # kd + ks <= 1 per channel (the material model's energy bound, render/losses.py): a
+        # brightened tile or grain streak is capped below 1 - specular.
+        kd = torch.minimum(torch.clamp(self.albedo(p, P, float(footprint)), min=0.0), 1.0 - P["specular"])
         n = len(uv)
         ks = P["specular"].expand(n)
         ka = torch.clamp(P["roughness"] ** 2, min=KA_MIN).expand(n)
