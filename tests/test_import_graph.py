@@ -3,6 +3,7 @@
 - scene/ (formats) imports nothing else of invrender;
 - render/ (the renderer library) imports scene/ and itself;
 - assets/ (the asset library: furniture meshes and their retrieval) imports scene/, render/ and itself;
+- materials/ (the procedural material library) imports scene/, render/ and itself;
 - a stage package imports the libraries and itself, never another stage;
 - tooling (bench/, mitsuba/, cli.py) may import anything, and nothing but tooling imports it.
 
@@ -14,7 +15,12 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "workflow" / "invrender"
-LIBRARIES = {"scene": {"scene"}, "render": {"scene", "render"}, "assets": {"scene", "render", "assets"}}
+LIBRARIES = {
+    "scene": {"scene"},
+    "render": {"scene", "render"},
+    "assets": {"scene", "render", "assets"},
+    "materials": {"scene", "render", "materials"},
+}
 TOOLING = {"bench", "mitsuba", "cli", "__init__", "__main__"}
 TEST_ONLY = {"mitsuba", "drjit"}  # the reference renderer: tests and benchmarks only
 
