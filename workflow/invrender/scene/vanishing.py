@@ -10,12 +10,16 @@ the focal length f with
     a1 a2 + b1 b2 + w1 w2 f^2 = 0.
 
 Steps: line segments by OpenCV's fast line detector (ximgproc, from opencv-contrib; LSD where it
-is absent); vanishing points by RANSAC over pairs of segments, each scored by the length of the
-segments that point at it (greedy: a found point's segments are removed, up to ``max_points``);
-then of every pair of points that gives a plausible f, the one whose segments are longest in all,
-counting a third point that is orthogonal to both. Lines of furniture turned away from the walls
-make vanishing points of their own; the orthogonality of the pair and of its third point is what
-tells the room's from theirs.
+is absent) on the photograph in sRGB, lightly blurred against render noise; vanishing points by
+RANSAC over pairs of segments, each scored by the length of the segments that point at it (greedy:
+a found point's segments are removed). Then a search over Manhattan frames rather than a solve from
+one pair: one direction is a found vanishing point (each of the three strongest is tried), the
+other two turn about it by theta; for each focal length and theta the three vanishing points are
+projected and each direction's segment support summed as sqrt(support) (a frame must see all three
+directions: the anchor alone explains most segments whatever f is). Lines of furniture turned away
+from the walls make vanishing points of their own; they support no orthogonal frame. The focal
+length of the best frame gives the field of view; the a1 a2 + b1 b2 + w1 w2 f^2 = 0 relation
+above is what ties the frame's points to f.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ class VanishingEstimate:
     focal: float  # pixels
     points: np.ndarray  # (K, 3) homogeneous vanishing points (pixel coordinates about the centre)
     weights: np.ndarray  # (K,) summed length of each point's segments, pixels
-    pair: tuple[int, int]  # the two points f came from
+    anchor: int  # the vanishing point the frame was searched about
     segments: int  # segments detected
 
 
@@ -56,7 +60,7 @@ def detect_segments(image: np.ndarray, min_length: float | None = None) -> np.nd
     grey8 = np.round(linear_to_srgb(grey / level) * 255).astype(np.uint8)
     grey8 = cv2.GaussianBlur(grey8, (0, 0), 1.0)
     h, w = grey8.shape
-    min_length = 0.03 * math.hypot(w, h) if min_length is None else min_length
+    min_length = 0.02 * math.hypot(w, h) if min_length is None else min_length
     if hasattr(cv2, "ximgproc"):
         detector = cv2.ximgproc.createFastLineDetector(length_threshold=int(min_length), do_merge=True)
         lines = detector.detect(grey8)
@@ -68,14 +72,15 @@ def detect_segments(image: np.ndarray, min_length: float | None = None) -> np.nd
     return seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) >= min_length]
 
 
-def _points_at(seg: np.ndarray, vp: np.ndarray, max_angle_deg: float) -> np.ndarray:
-    """Which segments point at the homogeneous point ``vp``: the angle between a segment and the
-    line from its midpoint to the point (a direction, for a point at infinity) is small."""
+def _points_at(seg: np.ndarray, vps: np.ndarray, max_angle_deg: float) -> np.ndarray:
+    """(K, N): which segments point at each homogeneous point of ``vps`` (K, 3): the angle between a
+    segment and the line from its midpoint to the point (a direction, for a point at infinity) is
+    below ``max_angle_deg``."""
     mid = 0.5 * (seg[:, :2] + seg[:, 2:])
     direction = seg[:, 2:] - seg[:, :2]
-    to_vp = vp[:2][None] - mid * vp[2]  # (x - m w): the direction to the point, either sign
-    cross = np.abs(direction[:, 0] * to_vp[:, 1] - direction[:, 1] * to_vp[:, 0])
-    norm = np.linalg.norm(direction, axis=1) * np.linalg.norm(to_vp, axis=1) + 1e-12
+    to_vp = vps[:, None, :2] - mid[None] * vps[:, None, 2:3]
+    cross = np.abs(direction[:, 0] * to_vp[..., 1] - direction[:, 1] * to_vp[..., 0])
+    norm = np.linalg.norm(direction, axis=1) * np.linalg.norm(to_vp, axis=-1) + 1e-12
     return cross / norm < math.sin(math.radians(max_angle_deg))
 
 
@@ -101,16 +106,13 @@ def vanishing_points(
         cand = np.cross(lines[i], lines[j])[i != j]
         cand = cand[np.linalg.norm(cand, axis=1) > 0]
         cand /= np.linalg.norm(cand, axis=1, keepdims=True)
-        best, best_score = None, 0.0
-        for vp in cand:
-            score = length[idx][_points_at(seg[idx], vp, max_angle_deg)].sum()
-            if score > best_score:
-                best, best_score = vp, score
-        if best is None:
+        if not len(cand):
             break
-        inliers = left & _points_at(seg, best, max_angle_deg)
+        scores = _points_at(seg[idx], cand, max_angle_deg) @ length[idx]
+        best = cand[np.argmax(scores)]
+        inliers = left & _points_at(seg, best[None], max_angle_deg)[0]
         best = _refit(lines[inliers], length[inliers], best)
-        inliers = left & _points_at(seg, best, max_angle_deg)
+        inliers = left & _points_at(seg, best[None], max_angle_deg)[0]
         points.append(best)
         weights.append(length[inliers].sum())
         left &= ~inliers
@@ -127,50 +129,74 @@ def _refit(lines: np.ndarray, length: np.ndarray, fallback: np.ndarray) -> np.nd
     return vt[-1] / np.linalg.norm(vt[-1])
 
 
-def _focal_squared(v1: np.ndarray, v2: np.ndarray) -> float:
-    """f^2 that makes v1 and v2 orthogonal directions (nan when w1 w2 vanishes)."""
-    ww = v1[2] * v2[2]
-    if abs(ww) < 1e-12:
-        return math.nan
-    return -(v1[0] * v2[0] + v1[1] * v2[1]) / ww
+def _closeness(mid: np.ndarray, unit: np.ndarray, vps: np.ndarray, max_angle_deg: float) -> np.ndarray:
+    """How well each segment (midpoint, unit direction) points at each homogeneous point ``vps``
+    (..., 3): 1 - (sin angle / sin max)^2, clipped at 0. Shape (..., N)."""
+    v = vps[..., None, :]
+    tx = v[..., 0] - mid[:, 0] * v[..., 2]
+    ty = v[..., 1] - mid[:, 1] * v[..., 2]
+    sin = np.abs(unit[:, 0] * ty - unit[:, 1] * tx) / (np.sqrt(tx * tx + ty * ty) + 1e-12)
+    return np.clip(1 - (sin / math.sin(math.radians(max_angle_deg))) ** 2, 0, None)
 
 
-def _direction(vp: np.ndarray, f: float) -> np.ndarray:
-    d = np.array([vp[0], vp[1], vp[2] * f])
-    return d / np.linalg.norm(d)
+def _frame_scores(seg, length, anchor, focals, thetas, max_angle_deg):
+    """Support of the Manhattan frames (focal f, turn theta about the anchor's direction), (F, T)."""
+    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+    unit = (seg[:, 2:] - seg[:, :2]) / length[:, None]
+    scores = np.empty((len(focals), len(thetas)))
+    for i, f in enumerate(focals):
+        d0 = np.array([anchor[0], anchor[1], anchor[2] * f])
+        d0 /= np.linalg.norm(d0)
+        u = np.cross(d0, [0.0, 0.0, 1.0] if abs(d0[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(d0, u)
+        d1 = np.cos(thetas)[:, None] * u + np.sin(thetas)[:, None] * w  # (T, 3)
+        d2 = np.cross(d0, d1)
+        dirs = np.stack([np.broadcast_to(d0, d1.shape), d1, d2], axis=1)  # (T, 3, 3)
+        vps = np.concatenate([dirs[..., :2], dirs[..., 2:] / f], axis=-1)  # homogeneous image points
+        closeness = _closeness(mid, unit, vps, max_angle_deg)  # (T, 3, N)
+        nearest = closeness == closeness.max(axis=1, keepdims=True)  # each segment counts once
+        per_direction = (closeness * nearest * length).sum(axis=2)  # (T, 3)
+        # sqrt: a frame is good when all three directions are seen, not when one is seen well
+        # (the anchor alone explains most segments whatever the focal length).
+        scores[i] = np.sqrt(per_direction).sum(axis=1)
+    return scores
 
 
-def estimate_fov(image: np.ndarray, max_orthogonality: float = 0.08, seed: int = 0) -> VanishingEstimate | None:
-    """The vertical field of view of a photograph (linear RGB, (H, W, 3)) from two orthogonal
-    vanishing points, or None when no pair gives a plausible one (then the stage says what to give)."""
+def _focal_of_fov(fov_y_deg, h: float, scale: float):
+    return h / 2 / np.tan(np.radians(fov_y_deg) / 2) / scale
+
+
+def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3, seed: int = 0) -> VanishingEstimate | None:
+    """The vertical field of view of a photograph (linear RGB, (H, W, 3)): the focal length of the
+    Manhattan frame that the most segment length points into.
+
+    The frame is searched, not solved from a pair of points: one of its directions is a vanishing
+    point that RANSAC found (each of the ``anchors`` strongest is tried), the others turn about it
+    by theta; for each focal length and theta the three vanishing points are projected and the
+    segments that point at them summed. Coarse grid (2 degrees of field of view, 2 of theta),
+    then a fine one around the best. None when fewer than 4 segments are found."""
     h, w = image.shape[:2]
     seg = detect_segments(image)
     if len(seg) < 4:
         return None
-    centred = seg - np.array([w, h, w, h]) / 2  # principal point at the image centre
     scale = max(w, h)
-    points, weights = vanishing_points(centred / scale, seed=seed)
-    f_lo, f_hi = (h / 2 / math.tan(math.radians(fov) / 2) / scale for fov in FOV_RANGE_DEG[::-1])
+    centred = (seg - np.array([w, h, w, h]) / 2) / scale  # principal point at the image centre
+    length = np.hypot(centred[:, 2] - centred[:, 0], centred[:, 3] - centred[:, 1])
+    points, weights = vanishing_points(centred, seed=seed, max_angle_deg=max_angle_deg)
     best = None
-    for a in range(len(points)):
-        for b in range(a + 1, len(points)):
-            f2 = _focal_squared(points[a], points[b])
-            if not f2 > 0 or not f_lo <= math.sqrt(f2) <= f_hi:
-                continue
-            f = math.sqrt(f2)
-            da, db = _direction(points[a], f), _direction(points[b], f)
-            score = weights[a] + weights[b]
-            for c in set(range(len(points))) - {a, b}:  # a third room direction confirms the pair
-                dc = _direction(points[c], f)
-                if abs(dc @ da) < max_orthogonality and abs(dc @ db) < max_orthogonality:
-                    score += weights[c]
-                    break
-            if best is None or score > best[0]:
-                best = (score, f, (a, b))
-    if best is None:
-        return None
-    _, f, pair = best
-    focal = f * scale
-    fov_y = math.degrees(2 * math.atan(h / 2 / focal))
+    coarse_fov = np.arange(FOV_RANGE_DEG[0], FOV_RANGE_DEG[1] + 0.5, 2.0)
+    coarse_theta = np.radians(np.arange(0.0, 90.0, 2.0))
+    for k in range(min(anchors, len(points))):
+        scores = _frame_scores(centred, length, points[k], _focal_of_fov(coarse_fov, h, scale), coarse_theta, max_angle_deg)
+        i, j = np.unravel_index(np.argmax(scores), scores.shape)
+        fine_fov = coarse_fov[i] + np.arange(-2.0, 2.01, 0.1)
+        fine_theta = coarse_theta[j] + np.radians(np.arange(-2.0, 2.01, 0.2))
+        scores = _frame_scores(centred, length, points[k], _focal_of_fov(fine_fov, h, scale), fine_theta, max_angle_deg)
+        i, j = np.unravel_index(np.argmax(scores), scores.shape)
+        if best is None or scores[i, j] > best[0]:
+            best = (scores[i, j], fine_fov[i], k)
+    _, fov_y, anchor = best
+    focal = float(h / 2 / math.tan(math.radians(fov_y) / 2))
     log.info("field of view from vanishing points: %.1f deg vertical (f = %.1f px, %d segments)", fov_y, focal, len(seg))
-    return VanishingEstimate(fov_y, focal, points, weights, pair, len(seg))
+    return VanishingEstimate(float(fov_y), focal, points, weights, anchor, len(seg))
