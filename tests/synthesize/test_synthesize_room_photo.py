@@ -159,3 +159,13 @@ def test_a_room_it_cannot_build_is_refused_naming_the_key(tmp_path, config, fiel
         stage.run("room_photo", tmp_path / "capture", config, spp=1, renderer_factory=_direct_light)
     assert field in info.value.expected
     assert not (tmp_path / "capture").exists()
+
+
+def test_without_camera_json_the_field_of_view_comes_from_vanishing_points(captures, tmp_path):
+    import shutil
+
+    capture = tmp_path / "office"
+    shutil.copytree(captures["office"], capture)
+    (capture / "camera.json").unlink()
+    fov, source = load_room_photo(capture).field_of_view()
+    assert source == "vanishing points" and fov == pytest.approx(_truth(capture)["camera"]["fov_y_deg"], abs=3.0)
