@@ -106,7 +106,13 @@ def test_depth_is_the_truth_geometrys_camera_z_under_each_segment(captures, layo
     for k, sid in enumerate(ids):
         cls, name = room.labels[int(sid)]
         if int(sid) not in objects:  # the shell: walls, floor, ceiling, window, ceiling panels
-            plane = name if cls in ("wall", "floor", "ceiling") else "ceiling" if cls == "lamp" else "wall_" + window["wall"]
+            plane = (
+                name
+                if cls in ("wall", "floor", "ceiling")
+                else "ceiling"
+                if cls == "lamp"
+                else "wall_" + window["wall"]
+            )
             axis, value = _shell_plane(plane, truth["box"])
             z = (value - eye[axis]) / rays[k, axis]  # rays are camera-z scaled: the hit's z is z
             assert depth[k] == pytest.approx(z, rel=1e-4), (name, xs[k], ys[k])
@@ -129,8 +135,10 @@ def test_objects_rest_on_their_support(captures):
     on_top = [obj for obj in truth["objects"] if obj["support"] != "floor"]
     assert on_top  # the crate on the coffee table
     for obj in truth["objects"]:
-        below = 0.0 if obj["support"] == "floor" else sum(
-            by_segment[int(obj["support"])][key][1] for key in ("position", "size")
+        below = (
+            0.0
+            if obj["support"] == "floor"
+            else sum(by_segment[int(obj["support"])][key][1] for key in ("position", "size"))
         )
         assert obj["position"][1] == pytest.approx(below)
         assert obj["scale"] == pytest.approx(max(obj["size"]))
@@ -149,7 +157,10 @@ def test_field_of_view_from_vanishing_points(captures, layout):
     "config, field",
     [
         ({"layout": "kitchen"}, "config.layout"),
-        ({"objects": [{"name": "bed", "kind": "box", "size": [2, 0.5, 2], "position": [2.0, 0.0]}]}, "objects[0] (bed)"),
+        (
+            {"objects": [{"name": "bed", "kind": "box", "size": [2, 0.5, 2], "position": [2.0, 0.0]}]},
+            "objects[0] (bed)",
+        ),
         ({"objects": [{"name": "vase", "kind": "box", "size": [0.2] * 3, "position": [0, 0], "on": "table"}]}, "on"),
         ({"camera": {"eye": [9.0, 1.5, 0.0]}}, "config.camera.eye"),
     ],

@@ -217,9 +217,22 @@ def test_a_room_capture_in_its_own_layout_says_what_it_lacks(tmp_path):
     """photo.exr at the top of the capture is its photograph; without depth.exr and panoptic.png
     + panoptic.json the workflow says so when it starts (the room stages need them), and that the
     field of view will come from vanishing points."""
-    lay_out(tmp_path, ["den/photo.exr", "den/photo.png", "full/photo.jpg", "full/depth.exr", "full/panoptic.png",
-                       "full/panoptic.json", "full/camera.json"])
-    scenes = {"den": {"mode": "room", "capture": {"path": "den"}}, "full": {"mode": "room", "capture": {"path": "full"}}}
+    lay_out(
+        tmp_path,
+        [
+            "den/photo.exr",
+            "den/photo.png",
+            "full/photo.jpg",
+            "full/depth.exr",
+            "full/panoptic.png",
+            "full/panoptic.json",
+            "full/camera.json",
+        ],
+    )
+    scenes = {
+        "den": {"mode": "room", "capture": {"path": "den"}},
+        "full": {"mode": "room", "capture": {"path": "full"}},
+    }
     result = dry_run(tmp_path, scenes)
     assert "scene 'den': the room capture 'den' lacks a depth map (capture.depth, or depth.exr" in result.stdout
     assert "panoptic.png and panoptic.json in the capture): the room stages will stop asking for them" in result.stdout

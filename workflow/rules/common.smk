@@ -482,8 +482,12 @@ def _check_room(name, capture):
         _named_file(name, "segmentation.labels", (".json", ".csv"))
     missing = []
     if "depth" not in capture and not (path / ROOM_DEPTH).is_file():
-        missing.append(f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)")
-    if "segmentation" not in capture and not all((path / f).is_file() for f in ROOM_SEGMENTATION):
+        missing.append(
+            f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
+        )
+    if "segmentation" not in capture and not all(
+        (path / f).is_file() for f in ROOM_SEGMENTATION
+    ):
         missing.append(
             "a panoptic segmentation (capture.segmentation {ids, labels}, or "
             f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"

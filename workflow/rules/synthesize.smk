@@ -5,7 +5,8 @@ rule synthesize:
     output:
         report(
             directory("results/{scene}/capture"),
-            patterns=["images/{view,[^/]+}.png", "{view,photo}.png"],  # photo.png: a room photo
+            # images/: the views of a multiview or duplicates capture; photo.png: a room photo
+            patterns=["images/{view,[^/]+}.png", "{view,photo}.png"],
             caption="../report/capture.rst",
             category="Capture",
             subcategory="{scene}",

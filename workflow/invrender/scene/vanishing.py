@@ -171,7 +171,9 @@ def _focal_of_fov(fov_y_deg, h: float, scale: float):
     return h / 2 / np.tan(np.radians(fov_y_deg) / 2) / scale
 
 
-def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3, seed: int = 0) -> VanishingEstimate | None:
+def estimate_fov(
+    image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3, seed: int = 0
+) -> VanishingEstimate | None:
     """The vertical field of view of a photograph (linear RGB, (H, W, 3)): the focal length of the
     Manhattan frame that the most segment length points into.
 
@@ -192,7 +194,9 @@ def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3
     coarse_fov = np.arange(FOV_RANGE_DEG[0], FOV_RANGE_DEG[1] + 0.5, 2.0)
     coarse_theta = np.radians(np.arange(0.0, 90.0, 2.0))
     for k in range(min(anchors, len(points))):
-        scores = _frame_scores(centred, length, points[k], _focal_of_fov(coarse_fov, h, scale), coarse_theta, max_angle_deg)
+        scores = _frame_scores(
+            centred, length, points[k], _focal_of_fov(coarse_fov, h, scale), coarse_theta, max_angle_deg
+        )
         i, j = np.unravel_index(np.argmax(scores), scores.shape)
         fine_fov = coarse_fov[i] + np.arange(-2.0, 2.01, 0.1)
         fine_theta = coarse_theta[j] + np.radians(np.arange(-2.0, 2.01, 0.2))
@@ -202,5 +206,7 @@ def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3
             best = (scores[i, j], fine_fov[i], k)
     _, fov_y, anchor = best
     focal = float(h / 2 / math.tan(math.radians(fov_y) / 2))
-    log.info("field of view from vanishing points: %.1f deg vertical (f = %.1f px, %d segments)", fov_y, focal, len(seg))
+    log.info(
+        "field of view from vanishing points: %.1f deg vertical (f = %.1f px, %d segments)", fov_y, focal, len(seg)
+    )
     return VanishingEstimate(float(fov_y), focal, points, weights, anchor, len(seg))

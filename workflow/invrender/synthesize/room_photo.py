@@ -27,11 +27,11 @@ import logging
 
 import numpy as np
 
+from ..assets.library import library
+from ..assets.primitives import Primitive, concatenate
 from ..scene.atlas import rasterize_atlas, unwrap
 from ..scene.room_photo import fov_y_to_x
 from ..scene.types import Maps, Mesh, Scene
-from ..assets.primitives import Primitive, concatenate
-from ..assets.library import library
 from .room import (
     ENVIRONMENT_DEFAULTS,
     ROOM_DEFAULTS,
@@ -46,7 +46,14 @@ from .room import (
     sky_cube_map,
 )
 
-__all__ = ["ROOM_PHOTO_DEFAULTS", "ROOM_PHOTO_LAYOUTS", "make_room_photo", "resolve_config", "yaw_matrix", "write_room_capture"]
+__all__ = [
+    "ROOM_PHOTO_DEFAULTS",
+    "ROOM_PHOTO_LAYOUTS",
+    "make_room_photo",
+    "resolve_config",
+    "yaw_matrix",
+    "write_room_capture",
+]
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +82,14 @@ ROOM_PHOTO_LAYOUTS = {
         "objects": [
             {"name": "sofa", "asset": "sofa_b", "position": [-1.95, 0.2], "yaw_deg": 90.0},
             {"name": "coffee_table", "asset": "table_a", "scale": 1.1, "position": [-0.6, 0.3], "yaw_deg": 88.0},
-            {"name": "crate", "asset": "box_a", "scale": 0.3, "position": [-0.55, 0.35], "yaw_deg": 20.0,
-             "on": "coffee_table"},
+            {
+                "name": "crate",
+                "asset": "box_a",
+                "scale": 0.3,
+                "position": [-0.55, 0.35],
+                "yaw_deg": 20.0,
+                "on": "coffee_table",
+            },
             {"name": "cabinet", "asset": "cabinet_a", "position": [0.9, -1.65], "yaw_deg": 0.0},
             {"name": "armchair", "asset": "chair_c", "position": [1.0, -0.3], "yaw_deg": 215.0},
             {"name": "floor_lamp", "asset": "lamp_a", "position": [-2.15, -1.6], "yaw_deg": 0.0},
@@ -90,8 +103,14 @@ ROOM_PHOTO_LAYOUTS = {
         "objects": [
             {"name": "bed", "asset": "bed_b", "position": [-0.85, -0.95], "yaw_deg": 0.0},
             {"name": "nightstand", "asset": "cabinet_c", "scale": 0.5, "position": [0.35, -1.8], "yaw_deg": 0.0},
-            {"name": "book_box", "asset": "box_a", "scale": 0.22, "position": [0.35, -1.8], "yaw_deg": 35.0,
-             "on": "nightstand"},
+            {
+                "name": "book_box",
+                "asset": "box_a",
+                "scale": 0.22,
+                "position": [0.35, -1.8],
+                "yaw_deg": 35.0,
+                "on": "nightstand",
+            },
             {"name": "desk", "asset": "desk_a", "scale": 1.2, "position": [1.5, 0.9], "yaw_deg": -90.0},
             {"name": "desk_chair", "asset": "chair_a", "position": [0.85, 1.0], "yaw_deg": 100.0},
         ],
@@ -113,8 +132,14 @@ ROOM_PHOTO_LAYOUTS = {
             {"name": "desk_b", "asset": "desk_d", "position": [0.6, -1.6], "yaw_deg": -12.0},
             {"name": "chair_b", "asset": "chair_d", "position": [0.7, -0.95], "yaw_deg": 150.0},
             {"name": "shelf", "asset": "shelf_b", "position": [2.75, 0.6], "yaw_deg": -90.0},
-            {"name": "printer", "asset": "box_a", "scale": 0.42, "position": [0.5, -1.65], "yaw_deg": 10.0,
-             "on": "desk_b"},
+            {
+                "name": "printer",
+                "asset": "box_a",
+                "scale": 0.42,
+                "position": [0.5, -1.65],
+                "yaw_deg": 10.0,
+                "on": "desk_b",
+            },
             {"name": "cabinet", "asset": "cabinet_b", "position": [-2.55, 1.2], "yaw_deg": 90.0},
         ],
         "camera": {"eye": [2.2, 1.7, 1.9], "target": [-1.0, 0.6, -1.2], "fov_y_deg": 50.0},
@@ -167,7 +192,9 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
     for k, obj in enumerate(cfg["objects"]):
         where = f"config.objects[{k}] ({obj.get('name', '?')})"
         if obj.get("asset") not in assets:
-            raise ValueError(f"{where}.asset: expected an asset of the library (chair_a, table_b, ...), got {obj.get('asset')!r}")
+            raise ValueError(
+                f"{where}.asset: expected an asset of the library (chair_a, table_b, ...), got {obj.get('asset')!r}"
+            )
         asset = assets[obj["asset"]]
         scale = float(obj.get("scale", asset.nominal_size))
         if not scale > 0:
@@ -197,8 +224,15 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
             local = (corners - base["position"][[0, 2]]) @ yaw_matrix(base["yaw_deg"])[np.ix_([0, 2], [0, 2])]
             if np.any(np.abs(local) > base["size"][[0, 2]] / 2):
                 raise ValueError(f"{where}: expected its footprint on top of {support!r}")
-        entry = {"name": obj["name"], "asset": asset, "scale": scale, "size": size, "position": position,
-                 "yaw_deg": yaw, "on": support}
+        entry = {
+            "name": obj["name"],
+            "asset": asset,
+            "scale": scale,
+            "size": size,
+            "position": position,
+            "yaw_deg": yaw,
+            "on": support,
+        }
         placed.append(entry)
         by_name[obj["name"]] = entry
     return placed
@@ -252,8 +286,16 @@ def _shell(cfg: dict, rng: np.random.Generator):
     return prim, names, materials, room_cfg
 
 
-PALETTE = np.array([[0.55, 0.22, 0.15], [0.20, 0.35, 0.55], [0.30, 0.50, 0.25], [0.65, 0.55, 0.25],
-                    [0.45, 0.45, 0.48], [0.60, 0.40, 0.50]])
+PALETTE = np.array(
+    [
+        [0.55, 0.22, 0.15],
+        [0.20, 0.35, 0.55],
+        [0.30, 0.50, 0.25],
+        [0.65, 0.55, 0.25],
+        [0.45, 0.45, 0.48],
+        [0.60, 0.40, 0.50],
+    ]
+)
 
 
 WOOD_PARTS = {"legs", "top", "frame", "shelves", "base", "pole", "arms"}
@@ -266,22 +308,40 @@ def _part_material(asset, part_name: str, color: np.ndarray, room_cfg: dict) -> 
     handles, an emitting shade for a lamp, the object's checkered colour for the rest."""
     if part_name in asset.emissive_parts:
         ke = (LAMP_RADIANCE * np.asarray(room_cfg["light_color"])).tolist()
-        return (Material(kd=0.8, ks=0.0, ka=room_cfg["emitter_ka"], ke=ke),
-                {"kind": "emitter", "kd": [0.8] * 3, "ke": ke})
+        return (
+            Material(kd=0.8, ks=0.0, ka=room_cfg["emitter_ka"], ke=ke),
+            {"kind": "emitter", "kd": [0.8] * 3, "ke": ke},
+        )
     if part_name in WOOD_PARTS:
-        return (Material(kd=_wood_grain(), ks=room_cfg["table_ks"], ka=room_cfg["table_ka"]),
-                {"kind": "wood_grain", "kd": [0.30, 0.18, 0.10], "ks": room_cfg["table_ks"], "ka": room_cfg["table_ka"]})
+        return (
+            Material(kd=_wood_grain(), ks=room_cfg["table_ks"], ka=room_cfg["table_ka"]),
+            {"kind": "wood_grain", "kd": [0.30, 0.18, 0.10], "ks": room_cfg["table_ks"], "ka": room_cfg["table_ka"]},
+        )
     if part_name in METAL_PARTS:
         return (Material(kd=0.05, ks=0.6, ka=0.02), {"kind": "plain", "kd": [0.05] * 3, "ks": 0.6, "ka": 0.02})
-    return (Material(kd=_checker(color), ks=room_cfg["ks"], ka=room_cfg["ka"]),
-            {"kind": "checker", "kd": color.tolist(), "cell": 0.15, "contrast": 0.7, "ks": room_cfg["ks"],
-             "ka": room_cfg["ka"]})
+    return (
+        Material(kd=_checker(color), ks=room_cfg["ks"], ka=room_cfg["ka"]),
+        {
+            "kind": "checker",
+            "kd": color.tolist(),
+            "cell": 0.15,
+            "contrast": 0.7,
+            "ks": room_cfg["ks"],
+            "ka": room_cfg["ka"],
+        },
+    )
 
 
 SHELL_MATERIALS = {  # truth descriptions of room.py's shell materials
     "floor": {"kind": "wood_planks", "kd": [0.50, 0.32, 0.17], "plank_width": 0.18, "plank_length": 1.3},
-    "wall": {"kind": "striped_wall", "kd": [0.80, 0.76, 0.67], "kd_dark": [0.68, 0.64, 0.57],
-             "wainscot_kd": [0.42, 0.50, 0.56], "stripe": 0.15, "wainscot": 0.9},
+    "wall": {
+        "kind": "striped_wall",
+        "kd": [0.80, 0.76, 0.67],
+        "kd_dark": [0.68, 0.64, 0.57],
+        "wainscot_kd": [0.42, 0.50, 0.56],
+        "stripe": 0.15,
+        "wainscot": 0.9,
+    },
     "ceiling": {"kind": "plain", "kd": [0.85, 0.85, 0.83]},
     "window": {"kind": "window", "kw": 1.0},
 }
@@ -342,8 +402,9 @@ def make_room_photo(config: dict | None = None) -> tuple[Scene, dict]:
     order = np.argsort(part, kind="stable")
     faces, part, face_segment = prim.faces[order], part[order], face_segment[order]
     atlas = unwrap(prim.positions, faces, resolution=int(cfg["atlas_resolution"]), padding=2, groups=part)
-    mesh = Mesh(positions=atlas.positions.astype(np.float32), faces=atlas.faces, uvs=atlas.uvs,
-                instance_ids=face_segment)
+    mesh = Mesh(
+        positions=atlas.positions.astype(np.float32), faces=atlas.faces, uvs=atlas.uvs, instance_ids=face_segment
+    )
     texels = rasterize_atlas(mesh, atlas.height, atlas.width)
     maps = Maps(**bake_materials(texels, part, materials, dilation=2), kg=sky_cube_map(cfg["environment"]))
     scene = Scene(mesh=mesh, maps=maps, cameras=[camera])
@@ -397,14 +458,30 @@ def _truth(cfg, room_cfg, objects, segment_id, camera, truth_materials) -> dict:
         )
     for obj in objects:  # a floor lamp's shade
         for part in obj["asset"].emissive_parts:
-            lights.append({"kind": "lamp", "segment": segment_id[obj["name"]], "object": obj["name"], "part": part,
-                           "ke": truth_materials[f"{obj['name']}.{part}"]["ke"]})
+            lights.append(
+                {
+                    "kind": "lamp",
+                    "segment": segment_id[obj["name"]],
+                    "object": obj["name"],
+                    "part": part,
+                    "ke": truth_materials[f"{obj['name']}.{part}"]["ke"],
+                }
+            )
     win = cfg["window"]
-    lights.append({"kind": "window", "segment": segment_id.get("window"), "wall": win["wall"],
-                   "center": list(map(float, win["center"])), "size": list(map(float, win["size"]))})
+    lights.append(
+        {
+            "kind": "window",
+            "segment": segment_id.get("window"),
+            "wall": win["wall"],
+            "center": list(map(float, win["center"])),
+            "size": list(map(float, win["size"])),
+        }
+    )
     lights.append({"kind": "environment", **copy.deepcopy(cfg["environment"])})
-    materials = {name: dict(desc, ks=room_cfg["ks"], ka=room_cfg["ka"]) if name != "window" else dict(desc)
-                 for name, desc in SHELL_MATERIALS.items()}
+    materials = {
+        name: dict(desc, ks=room_cfg["ks"], ka=room_cfg["ka"]) if name != "window" else dict(desc)
+        for name, desc in SHELL_MATERIALS.items()
+    }
     materials.update(truth_materials)
     return {
         "box": {"center": [0.0, sy / 2, 0.0], "size": [sx, sy, sz], "yaw_deg": 0.0},
