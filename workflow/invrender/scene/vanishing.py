@@ -143,10 +143,12 @@ def _closeness(mid: np.ndarray, unit: np.ndarray, vps: np.ndarray, max_angle_deg
     return np.clip(1 - (sin / math.sin(math.radians(max_angle_deg))) ** 2, 0, None)
 
 
-def _frame_scores(seg, length, anchor, focals, thetas, max_angle_deg):
-    """Support of the Manhattan frames (focal f, turn theta about the anchor's direction), (F, T)."""
+def _frame_scores(seg, weight, anchor, focals, thetas, max_angle_deg):
+    """Support of the Manhattan frames (focal f, turn theta about the anchor's direction), (F, T):
+    each segment counts ``weight`` times how well it points at the frame's nearest point."""
     mid = 0.5 * (seg[:, :2] + seg[:, 2:])
-    unit = (seg[:, 2:] - seg[:, :2]) / length[:, None]
+    unit = seg[:, 2:] - seg[:, :2]
+    unit = unit / np.linalg.norm(unit, axis=1, keepdims=True)
     scores = np.empty((len(focals), len(thetas)))
     for i, f in enumerate(focals):
         d0 = np.array([anchor[0], anchor[1], anchor[2] * f])
@@ -160,7 +162,7 @@ def _frame_scores(seg, length, anchor, focals, thetas, max_angle_deg):
         vps = np.concatenate([dirs[..., :2], dirs[..., 2:] / f], axis=-1)  # homogeneous image points
         closeness = _closeness(mid, unit, vps, max_angle_deg)  # (T, 3, N)
         nearest = closeness == closeness.max(axis=1, keepdims=True)  # each segment counts once
-        per_direction = (closeness * nearest * length).sum(axis=2)  # (T, 3)
+        per_direction = (closeness * nearest * weight).sum(axis=2)  # (T, 3)
         # sqrt: a frame is good when all three directions are seen, not when one is seen well
         # (the anchor alone explains most segments whatever the focal length).
         scores[i] = np.sqrt(per_direction).sum(axis=1)

@@ -86,7 +86,7 @@ ROOM_PHOTO_LAYOUTS = {
                 "name": "crate",
                 "asset": "box_a",
                 "scale": 0.3,
-                "position": [-0.55, 0.35],
+                "position": [-0.6, 0.45],
                 "yaw_deg": 20.0,
                 "on": "coffee_table",
             },
@@ -203,7 +203,10 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
         if obj["name"] in by_name:
             raise ValueError(f"{where}.name: expected each name once")
         support = obj.get("on", "floor")
-        shift = rng.uniform(-1, 1, 2) * cfg["jitter"] if support == "floor" else np.zeros(2)
+        # A floor-standing piece is shifted by a seeded amount; a piece on another moves with it.
+        shift = rng.uniform(-1, 1, 2) * cfg["jitter"]
+        if support != "floor":
+            shift = by_name[support]["shift"] if support in by_name else np.zeros(2)
         yaw = float(obj.get("yaw_deg", 0.0)) + rng.uniform(-1, 1) * cfg["yaw_jitter_deg"]
         x, z = np.asarray(obj["position"], np.float64) + shift
         if support == "floor":
@@ -216,6 +219,7 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
         corners = _footprint(size, yaw, position)
         if np.any(np.abs(corners) > np.array([sx, sz]) / 2 - 0.01):  # the seeded shift never pushes into a wall
             position[[0, 2]] -= shift
+            shift = np.zeros(2)
             corners = _footprint(size, yaw, position)
         if np.any(np.abs(corners) > np.array([sx, sz]) / 2 - 0.01) or y + size[1] > sy - 0.05:
             raise ValueError(f"{where}: expected it inside the room (1 cm from the walls, below the ceiling)")
@@ -232,6 +236,7 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
             "position": position,
             "yaw_deg": yaw,
             "on": support,
+            "shift": shift,
         }
         placed.append(entry)
         by_name[obj["name"]] = entry
