@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from invrender.duplicates_material.material import TexelMaterial, sky_neighbour_pairs
-from invrender.duplicates_material.support import first_sky
+from invrender.duplicates_material.support import below_horizon, first_sky
 from invrender.scene.cubemap import texel_directions
 from invrender.scene.types import Atlas, Mesh
 
@@ -23,8 +23,9 @@ def _tilted_floor(normal) -> Mesh:
 
 def test_the_sky_below_the_supports_horizon_starts_at_its_radiance():
     normal = np.array([0.2, 1.0, -0.1])
-    kg = first_sky(8, _tilted_floor(normal), [0.3, 0.2, 0.1])
-    below = texel_directions(8) @ normal < 0
+    below = below_horizon(8, _tilted_floor(normal))
+    np.testing.assert_array_equal(below, texel_directions(8) @ normal < 0)
+    kg = first_sky(8, below, [0.3, 0.2, 0.1])
     assert 0.4 < below.mean() < 0.6
     np.testing.assert_array_equal(kg[below], np.broadcast_to([0.3, 0.2, 0.1], kg[below].shape).astype(np.float32))
     np.testing.assert_array_equal(kg[~below], 1.0)
@@ -43,6 +44,10 @@ def test_sky_pairs_join_each_texel_to_its_neighbours_across_the_cube_edges():
     faces = np.repeat(np.arange(6), n * n)
     assert (faces[pairs[:, 0]] != faces[pairs[:, 1]]).sum() >= 12 * n  # every cube edge joins two faces
     assert np.bincount(pairs.ravel(), minlength=6 * n * n).min() >= 7  # a cube corner's texel has 7
+    below = below_horizon(n, _tilted_floor([0.0, 1.0, 0.3]))
+    split = sky_neighbour_pairs(n, below)
+    side = below.reshape(-1)
+    assert len(split) < len(pairs) and (side[split[:, 0]] == side[split[:, 1]]).all()
 
 
 def _material(kg) -> TexelMaterial:

@@ -53,14 +53,19 @@ def neighbour_pairs(texels: AtlasTexels, radius: float) -> np.ndarray:
     return flat[pairs]
 
 
-def sky_neighbour_pairs(n: int, k: int = SKY_NEIGHBOURS) -> np.ndarray:
+def sky_neighbour_pairs(n: int, below: np.ndarray | None = None, k: int = SKY_NEIGHBOURS) -> np.ndarray:
     """(m, 2) flat indices of each 6 x n x n cube texel and its k nearest by direction, across
-    the cube's edges too. Nearest rather than within a radius: a face's centre texels span
-    about three times the solid angle of its corners', so a radius leaves them alone."""
+    the cube's edges too, but never across the horizon `below` ((6, n, n) bool, or None): sky
+    and ground are not alike, and the sky would bleed into the ground no copy sees. Nearest
+    rather than within a radius: a face's centre texels span about three times the solid angle
+    of its corners', so a radius leaves them alone."""
     directions = texel_directions(n).reshape(-1, 3).astype(np.float64)
     k = min(k, len(directions) - 1)
     _, nearest = cKDTree(directions).query(directions, k=k + 1)
     pairs = np.stack([np.repeat(np.arange(len(directions)), k), nearest[:, 1:].reshape(-1)], 1)
+    if below is not None:
+        side = np.asarray(below).reshape(-1)
+        pairs = pairs[side[pairs[:, 0]] == side[pairs[:, 1]]]
     return np.unique(np.sort(pairs, 1), axis=0)
 
 

@@ -41,7 +41,7 @@ from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
 from .material import F0, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
 from .rays import SUPPORT_ID, pixel_pools
-from .support import first_sky, support_mesh, support_object, support_texels
+from .support import below_horizon, first_sky, support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training
 
 log = logging.getLogger(__name__)
@@ -129,8 +129,9 @@ def run(
     pools = pixel_pools(renderer, cameras, images, masks, registered, support is not None)
     if len(pools.object) == 0:
         raise SceneError(masks_path, "instances", "pixels of the registered copies in the images")
+    below = below_horizon(n, None if support is None else support[0])
     if len(pools.support):
-        kg = first_sky(n, support[0], np.median(pools.support_target, 0))
+        kg = first_sky(n, below, np.median(pools.support_target, 0))
     pairs = {"object": neighbour_pairs(texels, settings["smoothness_radius"])}
     if support is not None:
         pairs["support"] = neighbour_pairs(support[1], settings["smoothness_radius"])
@@ -141,7 +142,7 @@ def run(
     median = float(max(np.median(pixels @ LUMINANCE), 1e-3))
     training = Training(
         settings,
-        TexelMaterial(materials, kg, pairs, sky_neighbour_pairs(n)),
+        TexelMaterial(materials, kg, pairs, sky_neighbour_pairs(n, below)),
         renderer,
         scene.packing,
         cameras,

@@ -119,17 +119,22 @@ def support_object(mesh: Mesh) -> SceneObject:
     return SceneObject("support", mesh, "support", np.eye(4), instance_id=0)
 
 
-def first_sky(n: int, support: Mesh | None, support_radiance) -> np.ndarray:
-    """The sky training starts from, (6, n, n, 3): white (the first guess' sky) above the support's
-    horizon; below it, where the support hides the sky from every copy and no gradient ever
-    arrives, the support's median radiance in the photograph (the ground beyond the table looks
-    like the table). Left white, that half of the sphere was most of the env MSE: box-10-hd 0.154,
-    0.024 with the truth's ground there."""
-    kg = np.ones((6, n, n, 3), np.float32)
+def below_horizon(n: int, support: Mesh | None) -> np.ndarray | None:
+    """(6, n, n) bool: the sky texels whose directions point below the support's plane, which the
+    support hides from every copy (None without a support)."""
     if support is None:
-        return kg
+        return None
     a, b, c = support.positions[support.faces[0]].astype(np.float64)
     normal = np.cross(b - a, c - a)  # the quad faces +normal (_basis)
-    below = texel_directions(n) @ normal < 0
-    kg[below] = np.asarray(support_radiance, np.float32)
+    return texel_directions(n) @ normal < 0
+
+
+def first_sky(n: int, below: np.ndarray | None, support_radiance) -> np.ndarray:
+    """The sky training starts from, (6, n, n, 3): white (the first guess' sky) above the support's
+    horizon; below it (`below`), where no gradient ever arrives, the support's median radiance in
+    the photograph (the ground beyond the table looks like the table). Left white, that half of
+    the sphere was most of the env MSE: box-10-hd 0.154, 0.024 with the truth's ground there."""
+    kg = np.ones((6, n, n, 3), np.float32)
+    if below is not None:
+        kg[below] = np.asarray(support_radiance, np.float32)
     return kg

@@ -20,7 +20,9 @@ trainer/train_material.py) says how, and this follows it where our scenes allow:
   SfD's. Also on the sphere (``mse_solid_angle``, each cube texel by its solid angle), linear
   (``mse_linear``, ``maps.kg_mse``), and with the albedo's scale undone (``mse_with_albedo_scale``:
   the recovered kg divided by the per-channel linear factor, (channel scale)^2.2, that the albedo
-  needed, the other half of the kd * kg ambiguity; ours, not SfD's). The two skies are compared
+  needed, the other half of the kd * kg ambiguity; ours, not SfD's), and above the horizon only
+  (``mse_above_horizon``: the synthetic worlds' +Y up; the grid's rows above it): below it the
+  support hides the sky from every copy, so no image says anything of it. The two skies are compared
   in the same world directions without any alignment: the recovered world is the photograph's
   camera's, whose axes are the truth's for a synthetic capture (its scale and origin may differ:
   directions do not see them), so a recovered sky turned by R scores the turned sky's error.
@@ -325,8 +327,10 @@ def env_errors(recovered_kg, truth_kg, linear_scale=None) -> dict:
     def on_grid(kg) -> float:
         return mse(display(lookup_cube(kg, directions)), truth)
 
+    upper = directions[..., 1] > 0
     out = {
         "mse": on_grid(recovered_kg),
+        "mse_above_horizon": mse(display(lookup_cube(recovered_kg, directions[upper])), truth[upper]),
         "mse_solid_angle": kg_mse(display(as_cube(recovered_kg)), display(as_cube(truth_kg))),
         "mse_linear": kg_mse(recovered_kg, truth_kg),
         "grid": list(ENV_GRID),
