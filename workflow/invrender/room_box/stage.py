@@ -1,0 +1,271 @@
+"""The `room_box` stage (mode `room`, PSDR-Room section 4.2): the room as a box, from one photo's
+depth, wall/floor/ceiling segmentation and field of view.
+
+    out_dir/room.json    {"box": {"center", "size", "yaw_deg"} (as truth/room.json), "camera",
+                          "floor", "coarse": {"box", ...}, "losses": [...], "metrics": {...},
+                          "units", "depth_scale", "inputs", "settings", "seconds"}
+    out_dir/room_box.png the photo with the coarse (orange) and refined (green) box edges; the
+                          photo's labels, the coarse box's and the refined box's, side by side
+
+The coarse box (coarse.py) and its refinement by Eq. 2 (refine.py) work on the depth divided by
+its median (the paper's normalised depth); the box and camera are written in the depth's own
+units (meters for a metric depth, such as the synthetic rooms'). The world written is the
+refined box's: +Y up, the floor at y = 0, the box centred on x and z with yaw 0 (the room
+generator's convention), the camera posed in it. Metrics (metrics.py) for both boxes: mask IoU
+per class and depth error against the photo's labels and depth, and with a truth
+(``truth_dir``/room.json and the scene's camera) the corner error in the truth's units.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..scene.atomic import atomic_dir, check_output
+from ..scene.cameras import read_cameras
+from ..scene.room_photo import load_room_photo
+from ..scene.types import Camera, SceneError
+from ..segment.opencv import to_srgb8
+from .box import BOX_CLASSES, RoomBox, box_corners, rotation_y
+from .coarse import CoarseSettings, fit_coarse_box
+from .metrics import image_metrics, truth_metrics
+from .refine import RefineSettings, reduced_targets, refine_box
+
+__all__ = ["run", "photo_camera", "canonical", "read_truth"]
+
+logger = logging.getLogger(__name__)
+
+KIND = "room_box"
+
+
+def photo_camera(width: int, height: int, fov_y_deg: float) -> Camera:
+    """The photo's pinhole (square pixels, centred principal point), at the origin looking +z."""
+    f = 0.5 * height / np.tan(np.radians(fov_y_deg) / 2)
+    params = np.array([f, f, width / 2, height / 2])
+    return Camera("photo", "PINHOLE", int(width), int(height), params, np.eye(3), np.zeros(3))
+
+
+def canonical(box: RoomBox, camera: Camera, others: list[RoomBox] = ()) -> tuple[RoomBox, Camera, list[RoomBox]]:
+    """The same room in the world where ``box`` has yaw 0, its floor at y = 0 and its centre
+    above the origin: p' = R_y(-yaw) (p - o), o the centre of its floor."""
+    yaw = np.radians(box.yaw_deg)
+    origin = box.center - np.array([0.0, box.size[1] / 2, 0.0])
+    to_new = rotation_y(-yaw)
+    R = np.asarray(camera.R) @ rotation_y(yaw)
+    t = np.asarray(camera.R) @ origin + np.asarray(camera.t)
+    moved = Camera(camera.name, camera.model, camera.width, camera.height, camera.params, R, t)
+
+    def move(b: RoomBox) -> RoomBox:
+        return RoomBox(to_new @ (b.center - origin), b.size, b.yaw_deg - box.yaw_deg)
+
+    return move(box), moved, [move(b) for b in others]
+
+
+def _scaled(box: RoomBox, scale: float) -> RoomBox:
+    return RoomBox(box.center * scale, box.size * scale, box.yaw_deg)
+
+
+def _scaled_camera(camera: Camera, scale: float) -> Camera:
+    return Camera(camera.name, camera.model, camera.width, camera.height, camera.params, camera.R, camera.t * scale)
+
+
+def camera_json(camera: Camera, fov_y_deg: float) -> dict:
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    return {
+        "model": "PINHOLE",
+        "width": camera.width,
+        "height": camera.height,
+        "fov_y_deg": round(float(fov_y_deg), 6),
+        "params": [round(float(v), 6) for v in (fx, fy, cx, cy)],
+        "R": [[round(float(v), 9) for v in row] for row in camera.R],  # world-to-camera, OpenCV axes
+        "t": [round(float(v), 6) for v in camera.t],
+        "center": [round(float(v), 6) for v in camera.center],
+    }
+
+
+def read_truth(truth_dir) -> tuple[RoomBox, Camera] | None:
+    """The truth box (truth/room.json) and the photo's true camera (the truth scene's cameras,
+    the first one), or None without a truth."""
+    truth_dir = Path(truth_dir)
+    room_json = truth_dir / "room.json"
+    if not room_json.is_file():
+        return None
+    try:
+        box = RoomBox.from_json(json.loads(room_json.read_text())["box"])
+    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as error:
+        raise SceneError(room_json, "box", f"{{center: [x, y, z], size: [sx, sy, sz], yaw_deg}} ({error})") from None
+    cameras = "cameras"
+    if (truth_dir / "scene.json").is_file():
+        cameras = json.loads((truth_dir / "scene.json").read_text()).get("cameras", cameras)
+    if not (truth_dir / cameras).exists():
+        raise SceneError(truth_dir / cameras, "(directory)", "the truth scene's cameras (the photo's camera)")
+    return box, read_cameras(truth_dir / cameras)[0]
+
+
+def _classes(photo) -> np.ndarray:
+    classes = np.full((photo.height, photo.width), -1, np.int64)
+    for i, name in enumerate(BOX_CLASSES):
+        classes[photo.class_mask(name)] = i
+    return classes
+
+
+def run(
+    capture_dir,
+    out_dir,
+    truth_dir=None,
+    fov_y_deg: float | None = None,
+    coarse: CoarseSettings | None = None,
+    refine: RefineSettings | None = None,
+    seed: int = 0,
+    render=None,
+    log: logging.Logger = logger,
+) -> dict:
+    """Fit the room box of the capture in ``capture_dir`` (scene/room_photo.py's layout); write
+    ``out_dir``; return room.json's content. ``truth_dir``: default the capture's truth/ when it
+    has one. ``render``: the differentiable renderer (render_masks_depth by default)."""
+    capture_dir, out_dir = Path(capture_dir), Path(out_dir)
+    coarse, refine = coarse or CoarseSettings(), refine or RefineSettings()
+    started = time.perf_counter()
+    check_output(out_dir, KIND)
+    photo = load_room_photo(capture_dir, fov_y_deg=fov_y_deg, require=("depth", "segmentation"))
+    if photo.fov_y_deg is None:
+        raise SceneError(
+            capture_dir / "camera.json", "fov_y_deg", "the photo's vertical field of view in degrees (or --fov-y)"
+        )
+    valid = photo.depth > 0
+    if not valid.any():
+        raise SceneError(photo.paths["depth"], "depth", "a positive depth at some pixels (0 means unknown)")
+    scale = float(np.median(photo.depth[valid]))
+    depth = photo.normalised_depth().astype(np.float64)
+    classes = _classes(photo)
+    camera = photo_camera(photo.width, photo.height, photo.fov_y_deg)
+    files = {"depth": photo.paths["depth"], "segmentation": photo.paths["ids"]}
+
+    fit = fit_coarse_box(depth, classes, camera, coarse, seed=seed, files=files)
+    log.info(
+        "room_box: coarse box %s (ceiling %s, %d wall lines) in %.1f s",
+        fit.box.to_json(),
+        "seen" if fit.ceiling_seen else "not seen: 1.2x the top point",
+        len(fit.wall_lines),
+        time.perf_counter() - started,
+    )
+    targets = reduced_targets(classes, depth, fit.camera, refine.max_width)
+    refined, history = refine_box(fit.box, targets, refine, seed=seed, render=render, log=log)
+
+    box, posed, (coarse_box,) = canonical(refined, fit.camera, [fit.box])
+    box, coarse_box, posed = _scaled(box, scale), _scaled(coarse_box, scale), _scaled_camera(posed, scale)
+    metrics = {
+        "coarse": image_metrics(coarse_box, posed, classes, photo.depth, scale),
+        "refined": image_metrics(box, posed, classes, photo.depth, scale),
+    }
+    truth_dir = Path(truth_dir) if truth_dir is not None else capture_dir / "truth"
+    truth = read_truth(truth_dir) if truth_dir.exists() else None
+    if truth is not None:
+        metrics["coarse"].update(truth_metrics(coarse_box, posed, *truth))
+        metrics["refined"].update(truth_metrics(box, posed, *truth))
+    normal = posed.R[:, 1]  # the world's +Y in the camera frame
+    report = {
+        "box": box.to_json(),
+        "camera": camera_json(posed, photo.fov_y_deg),
+        "floor": {
+            "world": "y = 0",
+            "normal_camera": [round(float(v), 6) for v in normal],
+            "offset_camera": round(float(-normal @ posed.t), 6),  # n . p + offset = 0: the camera's height
+            "ransac": fit.floor,
+        },
+        "coarse": {
+            "box": coarse_box.to_json(),
+            "ceiling_seen": fit.ceiling_seen,
+            "wall_lines": fit.wall_lines,
+        },
+        "losses": [{k: (round(v, 6) if isinstance(v, float) else v) for k, v in h.items()} for h in history],
+        "metrics": metrics,
+        "units": "the depth's (meters for a metric depth)",
+        "depth_scale": round(scale, 6),
+        "truth": str(truth_dir) if truth is not None else None,
+        "inputs": {name: str(path) for name, path in photo.paths.items()},
+        "settings": {"coarse": asdict(coarse), "refine": asdict(refine), "seed": seed},
+    }
+    report["seconds"] = round(time.perf_counter() - started, 2)
+    figure = room_figure(photo.image, classes, posed, coarse_box, box)
+    with atomic_dir(out_dir, kind=KIND) as tmp:
+        (Path(tmp) / "room.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n")
+        cv2.imwrite(str(Path(tmp) / "room_box.png"), figure)
+    _log_metrics(log, metrics)
+    log.info("room_box: %s -> %s in %.1f s", capture_dir, out_dir, report["seconds"])
+    return report
+
+
+def _log_metrics(log, metrics: dict) -> None:
+    for which, m in metrics.items():
+        log.info(
+            "room_box: %s: mask IoU %s, depth error %s%s",
+            which,
+            m["mask_iou"],
+            m["depth_error"],
+            f", corner error {m['corner_error']} (visible {m['visible_corner_error']})" if "corner_error" in m else "",
+        )
+
+
+# ---------------------------------------------------------------------------- the figure
+
+CLASS_COLOURS = np.array([[170, 130, 90], [60, 110, 180], [230, 230, 210]], np.uint8)  # BGR: wall, floor, ceiling
+EDGES = [
+    (a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1
+]  # corners differing in one axis
+
+
+def _draw_box(image: np.ndarray, box: RoomBox, camera: Camera, colour, scale: float) -> None:
+    """The box's 12 edges, each cut at a near plane in front of the camera (an edge of the room
+    around the camera passes behind it)."""
+    corners = box_corners(box) @ np.asarray(camera.R).T + np.asarray(camera.t)
+    near = 1e-3 * float(np.abs(corners).max())
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    for a, b in EDGES:
+        p, q = corners[a], corners[b]
+        if p[2] < near and q[2] < near:
+            continue
+        if p[2] < near or q[2] < near:
+            s = (near - p[2]) / (q[2] - p[2])
+            cut = p + s * (q - p)
+            p, q = (cut, q) if p[2] < near else (p, cut)
+        ends = [
+            (int(round(scale * (fx * v[0] / v[2] + cx))), int(round(scale * (fy * v[1] / v[2] + cy)))) for v in (p, q)
+        ]
+        ok, e0, e1 = cv2.clipLine((0, 0, image.shape[1], image.shape[0]), *ends)
+        if ok:
+            cv2.line(image, e0, e1, colour, max(1, int(round(scale))) + 1, cv2.LINE_AA)
+
+
+def _label_image(classes: np.ndarray) -> np.ndarray:
+    out = np.zeros((*classes.shape, 3), np.uint8)
+    for i in range(len(BOX_CLASSES)):
+        out[classes == i] = CLASS_COLOURS[i]
+    return out
+
+
+def room_figure(image, classes, camera: Camera, coarse_box: RoomBox, box: RoomBox) -> np.ndarray:
+    """The photo with the coarse (orange) and refined (green) box; the photo's labels; the coarse
+    and refined boxes' labels (black: pixels that do not show the room, in the photo's labels)."""
+    from .box import cast_box
+
+    scale = max(1, int(np.ceil(480 / max(image.shape[1], 1))))
+    enlarge = lambda a: cv2.resize(a, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)  # noqa: E731
+    photo = enlarge(to_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy())
+    _draw_box(photo, coarse_box, camera, (0, 140, 255), scale)
+    _draw_box(photo, box, camera, (60, 220, 60), scale)
+    panels = [photo, enlarge(_label_image(classes))]
+    for b in (coarse_box, box):
+        labels = cast_box(b, camera)[0]
+        panels.append(enlarge(_label_image(np.where(classes >= 0, labels, -1))))
+    captions = ["photo: coarse (orange), refined (green)", "photo labels", "coarse box", "refined box"]
+    for panel, caption in zip(panels, captions):
+        cv2.putText(panel, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(panel, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    return np.vstack([np.hstack(panels[:2]), np.hstack(panels[2:])])
