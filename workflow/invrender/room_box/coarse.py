@@ -45,6 +45,17 @@ class CoarseSettings:
     no_ceiling_factor: float = 1.2  # the paper's height with no ceiling in view
     top_percentile: float = 99.5  # "the maximum height point", robust to single pixels
 
+    @classmethod
+    def from_overrides(cls, overrides: dict) -> CoarseSettings:
+        """The defaults with a user's KEY=VALUE overrides, an unknown key refused by name."""
+        known = cls.__dataclass_fields__
+        for key, value in overrides.items():
+            if key not in known:
+                raise SceneError("room-box --coarse", key, f"one of {', '.join(known)}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+                raise SceneError("room-box --coarse", key, f"a number of at least 0, got {value!r}")
+        return cls(**overrides)
+
 
 @dataclass
 class CoarseFit:

@@ -103,11 +103,11 @@ def box_loss(masks, depth, targets: Targets, depth_weight: float = 1.0):
         union = (weight * (masks[i] + target[i] - masks[i] * target[i])).sum()
         iou = inter / union
         loss = loss - iou
-        ious.append(float(iou))
+        ious.append(float(iou.detach()))
     dw = torch.as_tensor(targets.depth_weight, dtype=depth.dtype)
     l1 = (dw * (depth - torch.as_tensor(targets.depth, dtype=depth.dtype)).abs()).sum() / dw.sum()
     loss = loss + depth_weight * l1
-    return loss, {"iou": ious, "depth_l1": float(l1)}
+    return loss, {"iou": ious, "depth_l1": float(l1.detach())}
 
 
 def theta_of(box: RoomBox) -> torch.Tensor:
@@ -157,12 +157,13 @@ def refine_box(
         loss.backward()
         optimizer.step()
         schedule.step()
-        history.append({"step": step, "loss": float(loss), **parts_of})
+        value = float(loss.detach())
+        history.append({"step": step, "loss": value, **parts_of})
         if step % 10 == 0 or step == settings.iterations - 1:
             log.info(
                 "room_box: step %d loss %.4f (IoU %s, depth L1 %.4f) %.1f s",
                 step,
-                float(loss),
+                value,
                 ", ".join("-" if v is None else f"{v:.3f}" for v in parts_of["iou"]),
                 parts_of["depth_l1"],
                 time.perf_counter() - started,

@@ -30,7 +30,7 @@ import numpy as np
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import read_cameras
 from ..scene.room_photo import load_room_photo
-from ..scene.types import Camera, SceneError
+from ..scene.types import Camera, SceneError, require_positive
 from ..segment.opencv import to_srgb8
 from .box import BOX_CLASSES, RoomBox, box_corners, rotation_y
 from .coarse import CoarseSettings, fit_coarse_box
@@ -132,6 +132,8 @@ def run(
     capture_dir, out_dir = Path(capture_dir), Path(out_dir)
     coarse, refine = coarse or CoarseSettings(), refine or RefineSettings()
     started = time.perf_counter()
+    for name in ("iterations", "spp", "max_width"):
+        require_positive("room-box", f"--{name.replace('_', '-')}", getattr(refine, name))
     check_output(out_dir, KIND)
     photo = load_room_photo(capture_dir, fov_y_deg=fov_y_deg, require=("depth", "segmentation"))
     if photo.fov_y_deg is None:

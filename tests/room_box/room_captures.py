@@ -1,0 +1,59 @@
+"""Synthetic room captures for the room_box tests: a box room (its truth known) cast exactly by
+room_box.box.cast_box, an object standing in front of its back wall, optional depth noise, in
+scene/room_photo.py's layout with a truth/ (room.json and the photo's camera)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from invrender.room_box.box import CEILING, FLOOR, WALL, RoomBox, cast_box, rotation_y
+from invrender.scene.cameras import look_at, write_colmap
+from invrender.scene.room_photo import write_room_photo
+from invrender.scene.types import Camera
+
+# Not centred, not axis-aligned: the fit must find the room's frame, not assume the generator's.
+TRUTH = RoomBox([0.3, 1.35, -0.2], [4.2, 2.7, 3.4], 15.0)
+FOV_Y_DEG = 65.0
+SEGMENT = {WALL: 1, FLOOR: 2, CEILING: 3}
+OBJECT = 4
+LABELS = {1: ("wall", "walls"), 2: ("floor", "floor"), 3: ("ceiling", "ceiling"), 4: ("object", "cabinet")}
+
+
+def truth_camera(width=160, height=120) -> Camera:
+    """Near one wall, looking across the room and a little down: three walls, floor and ceiling
+    in view (the wall behind it is not)."""
+    place = lambda p: rotation_y(np.radians(TRUTH.yaw_deg)) @ np.asarray(p, float) + TRUTH.center * [1, 0, 1]  # noqa: E731
+    f = 0.5 * height / np.tan(np.radians(FOV_Y_DEG) / 2)
+    R, t = look_at(place([0.6, 1.4, 1.2]), place([-0.3, 1.2, -1.5]))
+    return Camera("photo.exr", "PINHOLE", width, height, np.array([f, f, width / 2, height / 2]), R, t)
+
+
+def box_photo(camera: Camera, noise=0.0, seed=0):
+    """(classes, segments, depth, image) of TRUTH seen by ``camera``: an object (nearer, class
+    object) covers a block of the back wall and floor; depth noise is relative (a monocular
+    estimate's errors grow with the distance)."""
+    classes, depth = cast_box(TRUTH, camera)
+    segments = np.vectorize(SEGMENT.get)(classes).astype(np.int32)
+    h, w = classes.shape
+    block = (slice(h // 2, int(0.8 * h)), slice(int(0.3 * w), int(0.5 * w)))
+    segments[block] = OBJECT
+    depth[block] *= 0.7
+    rng = np.random.default_rng(seed)
+    depth = depth * (1 + noise * rng.standard_normal(depth.shape))
+    shade = np.array([[0.6, 0.55, 0.5], [0.35, 0.25, 0.15], [0.9, 0.9, 0.9], [0.2, 0.3, 0.5]], np.float32)
+    image = shade[segments - 1] / (1 + 0.1 * depth[:, :, None]).astype(np.float32)
+    return np.where(segments == OBJECT, -1, classes), segments, depth.astype(np.float32), image
+
+
+def write_capture(path, camera=None, noise=0.0, seed=0, depth=True, labels=None, truth=True):
+    camera = camera or truth_camera()
+    _, segments, depth_map, image = box_photo(camera, noise, seed)
+    path.mkdir(parents=True, exist_ok=True)
+    write_room_photo(path, image, depth_map if depth else None, segments, labels or LABELS, FOV_Y_DEG)
+    if truth:
+        (path / "truth").mkdir()
+        (path / "truth" / "room.json").write_text(json.dumps({"box": TRUTH.to_json()}))
+        write_colmap(path / "truth" / "cameras", [camera])
+    return path
