@@ -146,6 +146,9 @@ def cmd_room_box(args):
         args.out,
         truth_dir=args.truth,
         fov_y_deg=args.fov_y,
+        fov_x_deg=args.fov_x,
+        focal_length=args.focal_length,
+        files={name: getattr(args, name) for name in ("photo", "depth", "ids", "labels") if getattr(args, name)},
         coarse=CoarseSettings.from_overrides(_key_values(args.coarse)),
         refine=RefineSettings(iterations=args.iterations, spp=args.spp, max_width=args.max_width),
         seed=args.seed,
@@ -484,7 +487,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("capture", help="room capture directory (photo, depth.exr, panoptic.png/json, camera.json)")
     p.add_argument("--out", required=True, help="directory to write (room.json, room_box.png)")
     p.add_argument("--truth", help="truth directory (room.json, cameras/; default: the capture's truth/ if any)")
-    p.add_argument("--fov-y", type=float, help="vertical field of view in degrees (wins over camera.json)")
+    lens = p.add_mutually_exclusive_group()
+    lens.add_argument("--fov-y", type=float, help="vertical field of view in degrees (wins over camera.json)")
+    lens.add_argument("--fov-x", type=float, help="horizontal field of view in degrees")
+    lens.add_argument("--focal-length", type=float, help="focal length in pixels (square pixels, centred)")
+    for name, what in (
+        ("photo", "photograph"),
+        ("depth", "depth EXR"),
+        ("ids", "segment id PNG"),
+        ("labels", "label table"),
+    ):
+        p.add_argument(f"--{name}", help=f"the {what}, relative to the capture (default: its standard name)")
     p.add_argument("--iterations", type=int, default=60, help="Adam steps of the refinement (Eq. 2)")
     p.add_argument("--spp", type=int, default=4, help="samples per pixel of each refinement render")
     p.add_argument("--max-width", type=int, default=128, help="width of the refinement's targets, at most")

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import read_cameras
-from ..scene.room_photo import load_room_photo
+from ..scene.room_photo import fov_x_to_y, load_room_photo
 from ..scene.types import Camera, SceneError, require_positive
 from ..segment.opencv import to_srgb8
 from .box import BOX_CLASSES, RoomBox, box_corners, rotation_y
@@ -108,6 +108,20 @@ def read_truth(truth_dir) -> tuple[RoomBox, Camera] | None:
     return box, read_cameras(truth_dir / cameras)[0]
 
 
+def _fov_y(photo, fov_y_deg, fov_x_deg, focal_length) -> float | None:
+    """The vertical field of view: the one given (at most one of the three), else the capture's."""
+    given = [v for v in (fov_y_deg, fov_x_deg, focal_length) if v is not None]
+    if len(given) > 1:
+        raise SceneError("room-box", "field of view", "at most one of fov_y_deg, fov_x_deg, focal_length")
+    if given and not (given[0] > 0 and (focal_length is not None or given[0] < 180)):
+        raise SceneError("room-box", "field of view", f"degrees in (0, 180) or a positive focal length, got {given[0]}")
+    if fov_x_deg is not None:
+        return fov_x_to_y(fov_x_deg, photo.width, photo.height)
+    if focal_length is not None:
+        return float(np.degrees(2 * np.arctan(0.5 * photo.height / focal_length)))
+    return fov_y_deg if fov_y_deg is not None else photo.fov_y_deg
+
+
 def _classes(photo) -> np.ndarray:
     classes = np.full((photo.height, photo.width), -1, np.int64)
     for i, name in enumerate(BOX_CLASSES):
@@ -120,6 +134,9 @@ def run(
     out_dir,
     truth_dir=None,
     fov_y_deg: float | None = None,
+    fov_x_deg: float | None = None,
+    focal_length: float | None = None,
+    files: dict | None = None,
     coarse: CoarseSettings | None = None,
     refine: RefineSettings | None = None,
     seed: int = 0,
@@ -128,17 +145,23 @@ def run(
 ) -> dict:
     """Fit the room box of the capture in ``capture_dir`` (scene/room_photo.py's layout); write
     ``out_dir``; return room.json's content. ``truth_dir``: default the capture's truth/ when it
-    has one. ``render``: the differentiable renderer (render_masks_depth by default)."""
+    has one. The field of view: ``fov_y_deg`` (vertical), ``fov_x_deg`` (horizontal) or
+    ``focal_length`` (pixels), else camera.json's. ``files``: the capture's files where they are not
+    its default names (load_room_photo's photo, depth, ids, labels; relative to the capture).
+    ``render``: the differentiable renderer (render_masks_depth by default)."""
     capture_dir, out_dir = Path(capture_dir), Path(out_dir)
     coarse, refine = coarse or CoarseSettings(), refine or RefineSettings()
     started = time.perf_counter()
     for name in ("iterations", "spp", "max_width"):
         require_positive("room-box", f"--{name.replace('_', '-')}", getattr(refine, name))
     check_output(out_dir, KIND)
-    photo = load_room_photo(capture_dir, fov_y_deg=fov_y_deg, require=("depth", "segmentation"))
+    photo = load_room_photo(capture_dir, **(files or {}), require=("depth", "segmentation"))
+    photo.fov_y_deg = _fov_y(photo, fov_y_deg, fov_x_deg, focal_length)
     if photo.fov_y_deg is None:
         raise SceneError(
-            capture_dir / "camera.json", "fov_y_deg", "the photo's vertical field of view in degrees (or --fov-y)"
+            capture_dir / "camera.json",
+            "fov_y_deg",
+            "the photo's vertical field of view in degrees (or --fov-y, --fov-x, --focal-length)",
         )
     valid = photo.depth > 0
     if not valid.any():
