@@ -374,7 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     stages = parser.add_subparsers(dest="stage", required=True, metavar="STAGE")
 
     p = stages.add_parser("synthesize", help="a parametric scene and its capture (the demo's input)")
-    p.add_argument("kind", choices=["room", "duplicates"])
+    p.add_argument("kind", choices=["room", "duplicates", "room_photo"])
     p.add_argument("--out", required=True, help="capture directory to write")
     p.add_argument("--config", help="YAML with the scene's size, counts, resolutions")
     p.add_argument("--spp", type=int, default=256)

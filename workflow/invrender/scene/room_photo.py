@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +54,7 @@ IDS_NAME = "panoptic.png"
 LABELS_NAME = "panoptic.json"
 LABELS_CSV = "panoptic.csv"
 CAMERA_NAME = "camera.json"
+log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
 # What a stage asks for, and what the user provides for it (the message of RoomPhoto.require).
@@ -113,6 +115,26 @@ class RoomPhoto:
         self.require("depth")
         valid = self.depth > 0
         return np.where(valid, self.depth / np.median(self.depth[valid]), 0.0).astype(np.float32)
+
+    def field_of_view(self) -> tuple[float, str]:
+        """(vertical field of view in degrees, where it came from): the capture's (camera.json or
+        the config), else the estimate from vanishing points (scene/vanishing.py), said in the log;
+        a photograph with too few lines for one stops, naming what to give."""
+        if self.fov_y_deg is not None:
+            return self.fov_y_deg, "given"
+        from .vanishing import estimate_fov
+
+        log.info("%s: no field of view given (camera.json or the config's capture.field_of_view): "
+                 "estimating it from vanishing points", self.paths.get("photo"))
+        estimate = estimate_fov(self.image)
+        if estimate is None:
+            raise SceneError(
+                self.paths.get("capture", "capture"),
+                "field of view",
+                f"{CAMERA_NAME} with fov_y_deg, or the config's capture.field_of_view (the photograph "
+                "has too few straight lines to estimate it from vanishing points)",
+            )
+        return estimate.fov_y_deg, "vanishing points"
 
     def class_mask(self, name: str) -> np.ndarray:
         """(H, W) bool: the pixels whose segment has class ``name``."""

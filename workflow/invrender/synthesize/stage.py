@@ -8,8 +8,11 @@ from ..scene.types import SceneError, require_positive
 from .capture import _default_renderer, write_capture
 from .duplicates import make_duplicates
 from .room import make_room
+from .room_photo import make_room_photo, write_room_capture
 
-KINDS = {"room": make_room, "duplicates": make_duplicates}
+KINDS = {"room": make_room, "duplicates": make_duplicates, "room_photo": make_room_photo}
+# A kind whose capture is not the multiview layout of capture.write_capture: its own writer.
+WRITERS = {"room_photo": write_room_capture}
 
 
 def run(
@@ -21,7 +24,7 @@ def run(
     device: str | None = None,
     renderer_factory=None,
 ) -> dict:
-    """Build the ``kind`` scene ("room" or "duplicates") and write its capture to ``out_dir``.
+    """Build the ``kind`` scene ("room", "duplicates" or "room_photo") and write its capture to ``out_dir``.
 
     ``seed`` (if given) overrides ``config["seed"]``; the same seed drives the scene and the
     render noise. Returns the scene's metadata.
@@ -37,5 +40,5 @@ def run(
     except ValueError as error:  # the generators name the config key and what they expected
         raise SceneError("synthesize --config", f"{kind} generator", f"a scene it can build ({error})") from None
     factory = renderer_factory or partial(_default_renderer, device=device)
-    write_capture(scene, metadata, out_dir, renderer_factory=factory, spp=spp, seed=metadata["seed"])
+    WRITERS.get(kind, write_capture)(scene, metadata, out_dir, renderer_factory=factory, spp=spp, seed=metadata["seed"])
     return metadata
