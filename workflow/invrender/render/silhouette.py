@@ -166,12 +166,9 @@ def edge_candidates(posed: PosedScene) -> dict:
         edges, faces = part.edges
         if not len(edges):
             continue
-        tri = world[part.faces]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        facing = np.sign(np.einsum("ij,ij->i", normal, C - tri[:, 0]))
         manifold = faces[:, 0] >= 0
         f0, f1 = np.maximum(faces[:, 0], 0), np.maximum(faces[:, 1], 0)
-        jump = ~manifold | (facing[f0] != facing[f1]) | (part.face_labels[f0] != part.face_labels[f1])
+        jump = ~manifold | _folded(world, part.faces, edges, f0, f1, C) | (part.face_labels[f0] != part.face_labels[f1])
         ends.append(world[edges[jump]])
         part_ids.append(np.full(int(jump.sum()), index))
     if not ends:
@@ -210,6 +207,17 @@ def edge_candidates(posed: PosedScene) -> dict:
         "edge_cdf": cdf.astype(np.float32),
         "total_length": float(length.sum()),
     }
+
+
+def _folded(world, faces, edges, f0, f1, C) -> np.ndarray:
+    """Silhouette edges: both faces on the same side of the plane through the camera centre and
+    the edge (one seen from the front, one from the back), whatever the faces' winding."""
+    a, b = world[edges[:, 0]] - C, world[edges[:, 1]] - C
+    m = np.cross(a, b)
+    far = lambda f: world[faces[f]].sum(1) - world[edges].sum(1)  # each face's third vertex
+    side0 = np.sign(np.einsum("ij,ij->i", m, far(f0) - C))
+    side1 = np.sign(np.einsum("ij,ij->i", m, far(f1) - C))
+    return side0 == side1
 
 
 def _clip_near(X: np.ndarray, part_ids: np.ndarray, near: float):
