@@ -157,12 +157,7 @@ def run(
     check_output(out_dir, KIND)
     photo = load_room_photo(capture_dir, **(files or {}), require=("depth", "segmentation"))
     photo.fov_y_deg = _fov_y(photo, fov_y_deg, fov_x_deg, focal_length)
-    if photo.fov_y_deg is None:
-        raise SceneError(
-            capture_dir / "camera.json",
-            "fov_y_deg",
-            "the photo's vertical field of view in degrees (or --fov-y, --fov-x, --focal-length)",
-        )
+    photo.fov_y_deg, fov_source = photo.field_of_view()  # else from vanishing points, or a SceneError
     valid = photo.depth > 0
     if not valid.any():
         raise SceneError(photo.paths["depth"], "depth", "a positive depth at some pixels (0 means unknown)")
@@ -197,7 +192,7 @@ def run(
     normal = posed.R[:, 1]  # the world's +Y in the camera frame
     report = {
         "box": box.to_json(),
-        "camera": camera_json(posed, photo.fov_y_deg),
+        "camera": camera_json(posed, photo.fov_y_deg) | {"fov_source": fov_source},
         "floor": {
             "world": "y = 0",
             "normal_camera": [round(float(v), 6) for v in normal],
