@@ -9,7 +9,7 @@ import json
 import numpy as np
 
 from invrender.room_box.box import CEILING, FLOOR, WALL, RoomBox, cast_box, rotation_y
-from invrender.scene.cameras import look_at, write_colmap
+from invrender.scene.cameras import look_at
 from invrender.scene.room_photo import write_room_photo
 from invrender.scene.types import Camera
 
@@ -54,6 +54,7 @@ def write_capture(path, camera=None, noise=0.0, seed=0, depth=True, labels=None,
     write_room_photo(path, image, depth_map if depth else None, segments, labels or LABELS, FOV_Y_DEG)
     if truth:
         (path / "truth").mkdir()
-        (path / "truth" / "room.json").write_text(json.dumps({"box": TRUTH.to_json()}))
-        write_colmap(path / "truth" / "cameras", [camera])
+        pose = {"R": camera.R.tolist(), "t": camera.t.tolist()}  # as the room_photo generator writes it
+        lens = {"width": camera.width, "height": camera.height, "fov_y_deg": FOV_Y_DEG}
+        (path / "truth" / "room.json").write_text(json.dumps({"box": TRUTH.to_json(), "camera": lens | pose}))
     return path

@@ -75,15 +75,15 @@ def test_without_a_ceiling_the_height_is_1_2_times_the_top_point():
 
 def test_refinement_lowers_the_corner_error_from_a_wrong_start():
     """2 % depth noise, a start 8 degrees off in yaw, 10 % off in size and 20 cm off in place:
-    Eq. 2 through render_masks_depth brings the corners in view to within 5 cm (measured ...),
-    and the mean over all eight corners down (the wall behind the camera has no gradient)."""
+    Eq. 2 through render_masks_depth brings the corners in view from 22 cm to within 5 cm (measured
+    3.0 cm), and the mean over all eight corners down (measured 0.48 -> 0.12 m: the sides behind the
+    camera have no gradient and keep the start's error)."""
     camera = truth_camera()
     classes, _, depth, _ = box_photo(camera, noise=0.02, seed=3)
     start = RoomBox(TRUTH.center + [0.2, -0.05, -0.15], TRUTH.size * [0.9, 1.05, 1.1], TRUTH.yaw_deg + 8.0)
     targets = reduced_targets(classes, depth.astype(np.float64), camera, 64)
-    refined, history = refine_box(start, targets, RefineSettings(iterations=40, learning_rate=0.02), seed=0)
+    refined, history = refine_box(start, targets, RefineSettings(iterations=40, learning_rate=0.04), seed=0)
     before, after = truth_metrics(start, camera, TRUTH, camera), truth_metrics(refined, camera, TRUTH, camera)
-    print(before, after, history[0]["loss"], history[-1]["loss"])
     assert (
         after["visible_corner_error"] < 0.05 and after["visible_corner_error"] < 0.25 * before["visible_corner_error"]
     )

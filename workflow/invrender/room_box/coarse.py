@@ -83,41 +83,40 @@ def _eroded(classes: np.ndarray, label: int, pixels: int) -> np.ndarray:
     return mask.astype(bool)
 
 
-def fit_plane(points: np.ndarray, rng: np.random.Generator, iterations: int, threshold: float):
-    """RANSAC plane (unit normal n, offset d with n.p + d = 0) of (N, 3) points, refined by
-    least squares on the inliers; returns (n, d, inlier mask)."""
-    best = np.zeros(len(points), bool)
+# RANSAC scores its hypotheses on at most this many of the points (a photo's wall has hundreds of
+# thousands): the count of a subset ranks them as well; the final inliers are taken from all.
+RANSAC_SUBSET = 20000
+
+
+def _ransac(points: np.ndarray, rng: np.random.Generator, iterations: int, threshold: float):
+    """RANSAC hyperplane (a plane of (N, 3) points, a line of (N, 2) ones) refined by least
+    squares on its inliers: (unit normal n, offset c with n.p = c, inlier mask over all points)."""
+    dims = points.shape[1]
+    subset = points[rng.choice(len(points), min(len(points), RANSAC_SUBSET), replace=False)]
+    best_normal, best_offset, best_count = None, 0.0, -1
     for _ in range(iterations):
-        a, b, c = points[rng.choice(len(points), 3, replace=False)]
-        normal = np.cross(b - a, c - a)
-        length = np.linalg.norm(normal)
-        if length < 1e-12:
+        sample = subset[rng.choice(len(subset), dims, replace=False)]
+        normal = np.linalg.svd(sample[1:] - sample[0])[2][-1]  # orthogonal to the sample's span
+        if np.linalg.matrix_rank(sample[1:] - sample[0], tol=1e-9) < dims - 1:
             continue
-        normal /= length
-        inliers = np.abs(points @ normal - normal @ a) < threshold
-        if inliers.sum() > best.sum():
-            best = inliers
-    centroid = points[best].mean(axis=0)
-    normal = np.linalg.svd(points[best] - centroid, full_matrices=False)[2][-1]
-    return normal, -normal @ centroid, best
+        count = int((np.abs(subset @ normal - normal @ sample[0]) < threshold).sum())
+        if count > best_count:
+            best_normal, best_offset, best_count = normal, normal @ sample[0], count
+    inliers = np.abs(points @ best_normal - best_offset) < threshold
+    centroid = points[inliers].mean(axis=0)
+    normal = np.linalg.svd(points[inliers] - centroid, full_matrices=False)[2][-1]
+    return normal, normal @ centroid, np.abs(points @ normal - normal @ centroid) < threshold
+
+
+def fit_plane(points: np.ndarray, rng: np.random.Generator, iterations: int, threshold: float):
+    """RANSAC plane of (N, 3) points: (unit normal n, offset d with n.p + d = 0, inlier mask)."""
+    normal, offset, inliers = _ransac(points, rng, iterations, threshold)
+    return normal, -offset, inliers
 
 
 def _fit_line(points: np.ndarray, rng: np.random.Generator, iterations: int, threshold: float):
     """RANSAC line of (N, 2) points: (unit normal m, offset c with m.p = c, inlier mask)."""
-    best = np.zeros(len(points), bool)
-    for _ in range(iterations):
-        a, b = points[rng.choice(len(points), 2, replace=False)]
-        direction = b - a
-        length = np.linalg.norm(direction)
-        if length < 1e-12:
-            continue
-        normal = np.array([-direction[1], direction[0]]) / length
-        inliers = np.abs(points @ normal - normal @ a) < threshold
-        if inliers.sum() > best.sum():
-            best = inliers
-    centroid = points[best].mean(axis=0)
-    normal = np.linalg.svd(points[best] - centroid, full_matrices=False)[2][-1]
-    return normal, normal @ centroid, best
+    return _ransac(points, rng, iterations, threshold)
 
 
 def frame_camera(camera: Camera, normal: np.ndarray, offset: float) -> tuple[np.ndarray, Camera]:

@@ -7,7 +7,8 @@
 - ``corner_error``: the mean distance of the box's 8 corners to the truth box's, both in the
   photo's camera frame (so the two worlds need not agree), matched one to one; and the same over
   the truth corners the photo shows (a corner behind the camera or outside the frame, such as
-  those of the wall behind it, is not observed, so no method can place it).
+  those of the wall behind it, is not observed, so no method can place it). A depth of unknown
+  scale is first aligned to the truth (``truth_scale``: the median ratio over the room's pixels).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from ..scene.cameras import project_points
 from ..scene.types import Camera
 from .box import BOX_CLASSES, RoomBox, box_corners, cast_box, matched_distances
 
-__all__ = ["image_metrics", "truth_metrics", "camera_corners"]
+__all__ = ["image_metrics", "truth_metrics", "truth_scale", "camera_corners"]
 
 
 def image_metrics(box: RoomBox, camera: Camera, classes: np.ndarray, depth: np.ndarray, scale: float) -> dict:
@@ -42,8 +43,18 @@ def camera_corners(box: RoomBox, camera: Camera) -> np.ndarray:
     return box_corners(box) @ np.asarray(camera.R).T + np.asarray(camera.t)
 
 
-def truth_metrics(box: RoomBox, camera: Camera, truth_box: RoomBox, truth_camera: Camera) -> dict:
-    estimate, truth = camera_corners(box, camera), camera_corners(truth_box, truth_camera)
+def truth_scale(classes: np.ndarray, depth: np.ndarray, truth_box: RoomBox, truth_camera: Camera) -> float:
+    """The factor from the depth's units to the truth's: the median ratio of the truth box's depth
+    to the photo's over the room's pixels (1 for a metric depth; a monocular estimate's scale is
+    unknown, and is aligned so in depth evaluations)."""
+    truth_depth = cast_box(truth_box, truth_camera)[1]
+    both = (classes >= 0) & (depth > 0) & (truth_depth > 0)
+    return float(np.median(truth_depth[both] / depth[both])) if both.any() else 1.0
+
+
+def truth_metrics(box: RoomBox, camera: Camera, truth_box: RoomBox, truth_camera: Camera, scale: float = 1.0) -> dict:
+    """Corner and size errors in the truth's units, the estimate first multiplied by ``scale``."""
+    estimate, truth = scale * camera_corners(box, camera), camera_corners(truth_box, truth_camera)
     uv = project_points(truth_camera, box_corners(truth_box))
     seen = np.isfinite(uv).all(axis=1)
     seen &= (uv[:, 0] >= 0) & (uv[:, 0] <= truth_camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] <= truth_camera.height)
@@ -52,6 +63,6 @@ def truth_metrics(box: RoomBox, camera: Camera, truth_box: RoomBox, truth_camera
         "corner_error": round(float(matched.mean()), 5),
         "visible_corner_error": round(float(matched[seen].mean()), 5) if seen.any() else None,
         "visible_corners": int(seen.sum()),
-        "size_error": [round(float(v), 5) for v in np.sort(box.size[[0, 2]]) - np.sort(truth_box.size[[0, 2]])]
-        + [round(float(box.size[1] - truth_box.size[1]), 5)],
+        "size_error": [round(float(v), 5) for v in scale * np.sort(box.size[[0, 2]]) - np.sort(truth_box.size[[0, 2]])]
+        + [round(float(scale * box.size[1] - truth_box.size[1]), 5)],
     }

@@ -13,8 +13,11 @@ sides, as the room was not empty", and comparing the box's wall with a wall mask
 would pull the box towards the holes. Targets are taken at a reduced resolution (whole blocks of
 pixels averaged: fractional targets and weights), which is what the refinement can afford.
 
-theta is the upright box: centre (3), yaw about +Y (radians) and log size (3); the renderer's
-9-vector per part is [centre, (0, yaw, 0), log size], so the box stays on the floor's normal.
+theta is the upright box by its yaw about +Y (radians) and the positions of its six sides along
+its own axes (the box is {R_y(yaw) q : low <= q <= high}); the renderer's 9-vector per part is
+[centre, (0, yaw, 0), log size], so the box stays on the floor's normal. Sides rather than centre
+and size: a side the photo does not show (the wall behind the camera) gets no gradient and stays
+where the coarse fit put it, instead of drifting with the centre.
 Adam with a learning rate decaying linearly to a tenth; each step renders with a new seed.
 """
 
@@ -28,7 +31,7 @@ import numpy as np
 import torch
 
 from ..scene.types import Camera
-from .box import BOX_CLASSES, RoomBox, box_mesh
+from .box import BOX_CLASSES, RoomBox, box_mesh, rotation_y
 
 __all__ = ["RefineSettings", "Targets", "reduced_targets", "box_loss", "refine_box", "theta_of", "box_of"]
 
@@ -110,19 +113,29 @@ def box_loss(masks, depth, targets: Targets, depth_weight: float = 1.0):
     return loss, {"iou": ious, "depth_l1": float(l1.detach())}
 
 
+def _rotation_y(yaw: torch.Tensor) -> torch.Tensor:
+    c, s, zero, one = torch.cos(yaw), torch.sin(yaw), torch.zeros_like(yaw), torch.ones_like(yaw)
+    return torch.stack([torch.stack([c, zero, s]), torch.stack([zero, one, zero]), torch.stack([-s, zero, c])])
+
+
 def theta_of(box: RoomBox) -> torch.Tensor:
-    return torch.tensor([*box.center, np.radians(box.yaw_deg), *np.log(box.size)], dtype=torch.float64)
+    """[yaw, low sides (3), high sides (3)]: the box is {R_y(yaw) q : low <= q <= high}."""
+    yaw = np.radians(box.yaw_deg)
+    middle = rotation_y(-yaw) @ box.center
+    return torch.tensor([yaw, *(middle - box.size / 2), *(middle + box.size / 2)], dtype=torch.float64)
 
 
 def box_of(theta: torch.Tensor) -> RoomBox:
-    values = theta.detach().cpu().numpy().astype(np.float64)
-    return RoomBox(values[:3], np.exp(values[4:7]), np.degrees(values[3]))
+    yaw, low, high = (v.detach().cpu().numpy().astype(np.float64) for v in (theta[0], theta[1:4], theta[4:7]))
+    return RoomBox(rotation_y(float(yaw)) @ ((low + high) / 2), high - low, np.degrees(float(yaw)))
 
 
 def _pose(theta: torch.Tensor) -> torch.Tensor:
     """The renderer's [t, axis-angle, log s] of the upright box."""
+    yaw, low, high = theta[0], theta[1:4], theta[4:7]
     zero = theta.new_zeros(1)
-    return torch.cat([theta[:3], zero, theta[3:4], zero, theta[4:7]]).reshape(1, 9)
+    center = _rotation_y(yaw) @ ((low + high) / 2)
+    return torch.cat([center, zero, yaw.reshape(1), zero, torch.log(high - low)]).reshape(1, 9)
 
 
 def refine_box(

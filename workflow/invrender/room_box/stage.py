@@ -34,7 +34,7 @@ from ..scene.types import Camera, SceneError, require_positive
 from ..segment.opencv import to_srgb8
 from .box import BOX_CLASSES, RoomBox, box_corners, rotation_y
 from .coarse import CoarseSettings, fit_coarse_box
-from .metrics import image_metrics, truth_metrics
+from .metrics import image_metrics, truth_metrics, truth_scale
 from .refine import RefineSettings, reduced_targets, refine_box
 
 __all__ = ["run", "photo_camera", "canonical", "read_truth"]
@@ -90,22 +90,30 @@ def camera_json(camera: Camera, fov_y_deg: float) -> dict:
 
 
 def read_truth(truth_dir) -> tuple[RoomBox, Camera] | None:
-    """The truth box (truth/room.json) and the photo's true camera (the truth scene's cameras,
-    the first one), or None without a truth."""
+    """The truth box and the photo's true camera, or None without a truth: truth/room.json's
+    "box" and "camera" (the room_photo generator's: width, height, fov_y_deg, world-to-camera R
+    and t), else the first camera of the truth scene (scene/ or cameras/ beside room.json)."""
     truth_dir = Path(truth_dir)
     room_json = truth_dir / "room.json"
     if not room_json.is_file():
         return None
     try:
-        box = RoomBox.from_json(json.loads(room_json.read_text())["box"])
-    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as error:
+        doc = json.loads(room_json.read_text())
+        box = RoomBox.from_json(doc["box"])
+    except (KeyError, TypeError, ValueError) as error:
         raise SceneError(room_json, "box", f"{{center: [x, y, z], size: [sx, sy, sz], yaw_deg}} ({error})") from None
-    cameras = "cameras"
-    if (truth_dir / "scene.json").is_file():
-        cameras = json.loads((truth_dir / "scene.json").read_text()).get("cameras", cameras)
-    if not (truth_dir / cameras).exists():
-        raise SceneError(truth_dir / cameras, "(directory)", "the truth scene's cameras (the photo's camera)")
-    return box, read_cameras(truth_dir / cameras)[0]
+    if "camera" in doc:
+        try:
+            cam = doc["camera"]
+            posed = photo_camera(int(cam["width"]), int(cam["height"]), float(cam["fov_y_deg"]))
+            posed.R, posed.t = np.array(cam["R"], np.float64).reshape(3, 3), np.array(cam["t"], np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError) as error:
+            raise SceneError(room_json, "camera", f"width, height, fov_y_deg, R (3 x 3), t (3) ({error})") from None
+        return box, posed
+    for cameras in (truth_dir / "scene" / "cameras", truth_dir / "cameras"):
+        if cameras.exists():
+            return box, read_cameras(cameras)[0]
+    raise SceneError(room_json, "camera", "the photo's true camera (or a scene/cameras or cameras/ beside it)")
 
 
 def _fov_y(photo, fov_y_deg, fov_x_deg, focal_length) -> float | None:
@@ -187,8 +195,10 @@ def run(
     truth_dir = Path(truth_dir) if truth_dir is not None else capture_dir / "truth"
     truth = read_truth(truth_dir) if truth_dir.exists() else None
     if truth is not None:
-        metrics["coarse"].update(truth_metrics(coarse_box, posed, *truth))
-        metrics["refined"].update(truth_metrics(box, posed, *truth))
+        to_truth = truth_scale(classes, photo.depth, *truth)
+        metrics["truth_scale"] = round(to_truth, 6)
+        metrics["coarse"].update(truth_metrics(coarse_box, posed, *truth, scale=to_truth))
+        metrics["refined"].update(truth_metrics(box, posed, *truth, scale=to_truth))
     normal = posed.R[:, 1]  # the world's +Y in the camera frame
     report = {
         "box": box.to_json(),
@@ -223,7 +233,8 @@ def run(
 
 
 def _log_metrics(log, metrics: dict) -> None:
-    for which, m in metrics.items():
+    for which in ("coarse", "refined"):
+        m = metrics[which]
         log.info(
             "room_box: %s: mask IoU %s, depth error %s%s",
             which,
