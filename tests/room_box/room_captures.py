@@ -58,3 +58,54 @@ def write_capture(path, camera=None, noise=0.0, seed=0, depth=True, labels=None,
         lens = {"width": camera.width, "height": camera.height, "fov_y_deg": FOV_Y_DEG}
         (path / "truth" / "room.json").write_text(json.dumps({"box": TRUTH.to_json(), "camera": lens | pose}))
     return path
+
+
+def estimate_like(capture, out, seed=0):
+    """A copy of ``capture`` whose depth looks like a monocular estimate's: an unknown scale
+    (x 0.37), a smooth relative distortion of +-5 % across the image and 2 % pixel noise."""
+    import shutil
+
+    from invrender.scene.images import read_image, write_exr
+
+    shutil.copytree(capture, out)
+    depth = read_image(capture / "depth.exr")
+    depth = depth[..., 0] if depth.ndim == 3 else depth
+    h, w = depth.shape
+    y, x = np.mgrid[0:h, 0:w] / np.array([h, w])[:, None, None]
+    rng = np.random.default_rng(seed)
+    field = 1 + 0.05 * np.sin(2 * np.pi * (1.3 * x + 0.7 * y) + rng.uniform(0, 2 * np.pi))
+    estimate = 0.37 * depth * field * (1 + 0.02 * rng.standard_normal(depth.shape))
+    write_exr(out / "depth.exr", np.where(depth > 0, estimate, 0).astype(np.float32))
+    return out
+
+
+def study(captures: dict, work, **settings) -> list[str]:
+    """docs/room.md's table: the stage on each capture, exact and estimate-like depth; one
+    Markdown row each (corner errors in meters, all and in view; mask IoU; seconds)."""
+    import time
+
+    from invrender.room_box import stage
+
+    rows = []
+    for name, capture in captures.items():
+        for depth, path in (("exact", capture), ("estimate-like", estimate_like(capture, work / f"{name}_estimate"))):
+            started = time.perf_counter()
+            report = stage.run(path, work / f"{name}_{depth}_out", truth_dir=capture / "truth", **settings)
+            seconds = time.perf_counter() - started
+            m = report["metrics"]
+            cells = [name, depth]
+            for key in ("corner_error", "visible_corner_error"):
+                cells.append(f"{m['coarse'][key]:.3f} -> {m['refined'][key]:.3f}")
+            for cls in ("wall", "floor", "ceiling"):
+                a, b = m["coarse"]["mask_iou"][cls], m["refined"]["mask_iou"][cls]
+                cells.append("-" if a is None else f"{a:.3f} -> {b:.3f}")
+            cells.append(f"{m['coarse']['depth_error_relative']:.4f} -> {m['refined']['depth_error_relative']:.4f}")
+            cells.append(f"{seconds:.0f}")
+            rows.append("| " + " | ".join(cells) + " |")
+    return rows
+
+
+STUDY_HEADER = [
+    "| room | depth | corner error, m | in view, m | IoU wall | IoU floor | IoU ceiling | depth error (rel.) | s |",
+    "|---|---|---|---|---|---|---|---|---|",
+]

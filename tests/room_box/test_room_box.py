@@ -114,7 +114,7 @@ def test_stage_writes_the_box_the_camera_and_both_fits_metrics(tmp_path):
         assert m["visible_corner_error"] < 0.05 and m["corner_error"] < 0.5, m  # meters
         assert m["depth_error_relative"] < 0.02  # the noise is 1 % of each depth
     figure = cv2.imread(str(out / "room_box.png"))
-    assert figure.shape == (2 * 360, 2 * 480, 3)
+    assert figure.shape == (2 * 480, 2 * 640, 3)  # 2 x 2 panels, 160 x 120 enlarged 4 times
     assert (out / ".invrender-output").read_text().strip() == "room_box"
 
 
@@ -157,3 +157,19 @@ def test_no_floor_points_is_refused_naming_the_segmentation(tmp_path):
 def test_unknown_coarse_setting_is_named():
     with pytest.raises(SceneError, match="treshold"):
         CoarseSettings.from_overrides({"treshold": 0.1})
+
+
+# The study behind docs/room.md's table (three synthesized rooms at 1024 x 768, about 15 minutes):
+#   PYTHONPATH=workflow python -m pytest tests/room_box/test_room_box.py -m benchmark -s -n 0
+@pytest.mark.benchmark
+def test_study_of_the_room_stage(tmp_path):
+    from room_captures import STUDY_HEADER, study
+
+    from invrender.synthesize import stage as synthesize
+
+    captures = {}
+    for layout in ("living", "bedroom", "office"):
+        captures[layout] = tmp_path / layout
+        synthesize.run("room_photo", captures[layout], {"layout": layout}, spp=4, seed=0)
+    rows = study(captures, tmp_path)
+    print("\n" + "\n".join(STUDY_HEADER + rows))

@@ -271,7 +271,7 @@ def _draw_box(image: np.ndarray, box: RoomBox, camera: Camera, colour, scale: fl
         ]
         ok, e0, e1 = cv2.clipLine((0, 0, image.shape[1], image.shape[0]), *ends)
         if ok:
-            cv2.line(image, e0, e1, colour, max(1, int(round(scale))) + 1, cv2.LINE_AA)
+            cv2.line(image, e0, e1, colour, 2, cv2.LINE_AA)
 
 
 def _label_image(classes: np.ndarray) -> np.ndarray:
@@ -282,20 +282,29 @@ def _label_image(classes: np.ndarray) -> np.ndarray:
 
 
 def room_figure(image, classes, camera: Camera, coarse_box: RoomBox, box: RoomBox) -> np.ndarray:
-    """The photo with the coarse (orange) and refined (green) box; the photo's labels; the coarse
-    and refined boxes' labels (black: pixels that do not show the room, in the photo's labels)."""
+    """2 x 2 panels, each about 640 pixels wide: the photo with the coarse (orange) and refined
+    (green) box; the photo's labels; the coarse and refined boxes' labels, red where they differ
+    from the photo's (black: pixels that do not show the room, in the photo's labels)."""
     from .box import cast_box
 
-    scale = max(1, int(np.ceil(480 / max(image.shape[1], 1))))
-    enlarge = lambda a: cv2.resize(a, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)  # noqa: E731
-    photo = enlarge(to_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy())
+    scale = 640 / max(image.shape[1], 1)
+    if scale >= 1:
+        scale = float(int(scale))  # a whole factor: pixels stay square blocks
+
+    def resize(a, nearest=True):
+        size = (round(a.shape[1] * scale), round(a.shape[0] * scale))
+        return cv2.resize(a, size, interpolation=cv2.INTER_NEAREST if nearest or scale > 1 else cv2.INTER_AREA)
+
+    photo = resize(to_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy(), nearest=False)
     _draw_box(photo, coarse_box, camera, (0, 140, 255), scale)
     _draw_box(photo, box, camera, (60, 220, 60), scale)
-    panels = [photo, enlarge(_label_image(classes))]
+    panels = [photo, resize(_label_image(classes))]
     for b in (coarse_box, box):
-        labels = cast_box(b, camera)[0]
-        panels.append(enlarge(_label_image(np.where(classes >= 0, labels, -1))))
-    captions = ["photo: coarse (orange), refined (green)", "photo labels", "coarse box", "refined box"]
+        labels = np.where(classes >= 0, cast_box(b, camera)[0], -1)
+        panel = _label_image(labels)
+        panel[labels != classes] = (0, 0, 255)
+        panels.append(resize(panel))
+    captions = ["photo: coarse (orange), refined (green)", "photo labels", "coarse box (red: differs)", "refined box"]
     for panel, caption in zip(panels, captions):
         cv2.putText(panel, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
         cv2.putText(panel, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
