@@ -13,7 +13,7 @@ from room_captures import LABELS, TRUTH, box_photo, truth_camera, write_capture
 
 from invrender.cli import main
 from invrender.room_box import stage
-from invrender.room_box.box import RoomBox, cast_box
+from invrender.room_box.box import RoomBox, cast_box, rotation_y
 from invrender.room_box.coarse import CoarseSettings, fit_coarse_box
 from invrender.room_box.metrics import truth_metrics
 from invrender.room_box.refine import RefineSettings, reduced_targets, refine_box
@@ -173,3 +173,18 @@ def test_study_of_the_room_stage(tmp_path):
         synthesize.run("room_photo", captures[layout], {"layout": layout}, spp=4, seed=0)
     rows = study(captures, tmp_path)
     print("\n" + "\n".join(STUDY_HEADER + rows))
+
+
+def test_refinement_keeps_the_camera_inside_the_box():
+    """A side that crosses the camera (here the start's wall behind it) is projected back beyond
+    it after the first step: seen from outside, the box would cover the photo with one wall."""
+    camera = truth_camera()
+    classes, _, depth, _ = box_photo(camera)
+    start = RoomBox(TRUTH.center, TRUTH.size, TRUTH.yaw_deg)
+    local = rotation_y(np.radians(-TRUTH.yaw_deg)) @ (camera.center - TRUTH.center)
+    start.size[2] = 2 * abs(local[2]) - 0.2  # the camera 10 cm outside the +z or -z side
+    assert not (np.abs(local) < start.size / 2).all()
+    targets = reduced_targets(classes, depth.astype(np.float64), camera, 32)
+    refined, _ = refine_box(start, targets, RefineSettings(iterations=1), seed=0)
+    local = rotation_y(np.radians(-refined.yaw_deg)) @ (camera.center - refined.center)
+    assert (np.abs(local) <= refined.size / 2 - 0.05 + 1e-9).all()

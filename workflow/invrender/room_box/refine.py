@@ -18,7 +18,8 @@ its own axes (the box is {R_y(yaw) q : low <= q <= high}); the renderer's 9-vect
 [centre, (0, yaw, 0), log size], so the box stays on the floor's normal. Sides rather than centre
 and size: a side the photo does not show (the wall behind the camera) gets no gradient and stays
 where the coarse fit put it, instead of drifting with the centre.
-Adam with a learning rate decaying linearly to a tenth; each step renders with a new seed.
+Adam with a learning rate decaying linearly to a tenth; each step renders with a new seed; after
+each step the sides are projected to keep the camera inside the box.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ class RefineSettings:
     spp: int = 4  # samples per pixel of each render (the edges get their own samples)
     max_width: int = 128  # the targets' width after block averaging, at most
     depth_weight: float = 1.0  # Eq. 2 weighs the two terms equally
+    camera_margin: float = 0.05  # each side stays this far beyond the camera (normalised depth units)
 
 
 @dataclass
@@ -138,6 +140,17 @@ def _pose(theta: torch.Tensor) -> torch.Tensor:
     return torch.cat([center, zero, yaw.reshape(1), zero, torch.log(high - low)]).reshape(1, 9)
 
 
+def _keep_camera_inside(theta: torch.Tensor, camera_center: np.ndarray, margin: float) -> None:
+    """Project the sides back to at least ``margin`` beyond the camera: the room is seen from
+    inside, and a side that crosses the camera (a wall beside or behind it, which the photo shows
+    little of or not at all) would turn the box inside out in one step: the renderer would then
+    see the box's outside, a wall over the whole photo."""
+    with torch.no_grad():
+        inside = rotation_y(-float(theta[0])) @ np.asarray(camera_center, np.float64)
+        theta[1:4] = torch.minimum(theta[1:4], torch.as_tensor(inside - margin))
+        theta[4:7] = torch.maximum(theta[4:7], torch.as_tensor(inside + margin))
+
+
 def refine_box(
     box: RoomBox,
     targets: Targets,
@@ -170,6 +183,7 @@ def refine_box(
         loss.backward()
         optimizer.step()
         schedule.step()
+        _keep_camera_inside(theta, targets.camera.center, settings.camera_margin)
         value = float(loss.detach())
         history.append({"step": step, "loss": value, **parts_of})
         if step % 10 == 0 or step == settings.iterations - 1:
