@@ -23,7 +23,7 @@ from invrender.scene.mesh_io import write_ply
 from invrender.scene.poses import write_poses
 from invrender.scene.types import Mesh, SceneError
 from invrender.synthesize.duplicates import make_duplicates, object_mesh
-from invrender.synthesize.primitives import box
+from invrender.assets.primitives import box
 
 X, Y, Z = np.eye(3)
 

@@ -22,7 +22,7 @@ from invrender.scene.cameras import pinhole_camera, write_colmap
 from invrender.scene.images import write_exr
 from invrender.scene.mesh_io import write_ply
 from invrender.scene.types import Camera, Maps, Mesh, Scene
-from invrender.synthesize.primitives import axis_grid, concatenate, subdivide_breaks
+from invrender.assets.primitives import axis_grid, concatenate, subdivide_breaks
 from invrender.synthesize.room import Material, bake_materials
 
 BLACK = Material(kd=0.0, ks=0.0, ka=0.3)

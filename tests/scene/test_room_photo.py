@@ -143,3 +143,14 @@ def test_a_camera_of_another_size_is_refused(capture):
     (capture / "camera.json").write_text(json.dumps({"width": W, "height": H + 2, "fov_y_deg": 40}))
     error = _error(capture)
     assert error.field == "height" and error.expected == f"{H} as the photo, got {H + 2}"
+
+
+def test_a_photograph_without_lines_and_field_of_view_names_what_to_give(tmp_path):
+    """No camera.json and nothing straight to find vanishing points in: stop, naming camera.json
+    and the config key (the given field of view is returned as it is)."""
+    write_room_photo(tmp_path, np.full((48, 64, 3), 0.5, np.float32))
+    with pytest.raises(SceneError) as info:
+        load_room_photo(tmp_path).field_of_view()
+    assert info.value.field == "field of view"
+    assert "camera.json with fov_y_deg" in info.value.expected and "capture.field_of_view" in info.value.expected
+    assert load_room_photo(tmp_path, fov_y_deg=40.0).field_of_view() == (40.0, "given")

@@ -7,7 +7,7 @@ import pytest
 
 from invrender.scene.atlas import AtlasTexels, dilate, rasterize_atlas, texel_index, triangle_areas, unwrap
 from invrender.scene.types import Mesh
-from invrender.synthesize.primitives import box, concatenate, cylinder, face_normals
+from invrender.assets.primitives import box, concatenate, cylinder, face_normals
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import pytest
 from invrender.scene.atlas import texel_index
 from invrender.scene.cameras import project_points
 from invrender.synthesize.duplicates import _label, build_object, make_duplicates, object_mesh
-from invrender.synthesize.primitives import signed_volume
+from invrender.assets.primitives import signed_volume
 
 
 @pytest.fixture(scope="module")
@@ -162,7 +162,7 @@ from invrender.synthesize.duplicates import (  # noqa: E402
     convex_gap,
     resolve_config,
 )
-from invrender.synthesize.primitives import BOX_SIDES  # noqa: E402
+from invrender.assets.primitives import BOX_SIDES  # noqa: E402
 from invrender.synthesize.room import merge_config  # noqa: E402
 
 PRESET_NAMES = sorted(DUPLICATES_PRESETS)

@@ -7,7 +7,7 @@ import pytest
 
 from invrender.scene.atlas import dilate, rasterize_atlas, texel_index
 from invrender.scene.cameras import project_points
-from invrender.synthesize.primitives import face_normals, signed_volume
+from invrender.assets.primitives import face_normals, signed_volume
 from invrender.synthesize.room import make_room, sky_cube_map
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 import yaml
-from workflow_helpers import job_counts, snakemake
+from workflow_helpers import TEST_CONFIG, job_counts, snakemake
 
 COLMAP = ["sparse/cameras.txt", "sparse/images.txt"]
 
@@ -201,3 +201,40 @@ def test_bad_capture_is_refused_naming_scene_key_and_path(tmp_path, name):
     for text in expected:
         assert text in result.stdout, result.stdout[-2000:]
     assert not (tmp_path / "results").exists()
+
+
+def test_a_synthetic_room_photo_is_a_room_scene_made_by_synthesize(tmp_path):
+    """Kind room_photo (the fixture tests/workflow/room_photo.yaml) gives mode room: only its
+    capture is built (no cameras rule: its field of view is in camera.json), by synthesize."""
+    result = snakemake(tmp_path, "-n", "-p", config=TEST_CONFIG.with_name("room_photo.yaml"))
+    assert job_counts(result.stdout) == {"synthesize": 1, "all": 1}
+    assert "synthesize room_photo --out results/living/capture" in result.stdout
+    refused = dry_run(tmp_path, {"living": {"mode": "multiview", "synthetic": {"kind": "room_photo"}}}, check=False)
+    assert "'multiview' disagrees with synthetic.kind 'room_photo', whose capture is room" in refused.stdout
+
+
+def test_a_room_capture_in_its_own_layout_says_what_it_lacks(tmp_path):
+    """photo.exr at the top of the capture is its photograph; without depth.exr and panoptic.png
+    + panoptic.json the workflow says so when it starts (the room stages need them), and that the
+    field of view will come from vanishing points."""
+    lay_out(
+        tmp_path,
+        [
+            "den/photo.exr",
+            "den/photo.png",
+            "full/photo.jpg",
+            "full/depth.exr",
+            "full/panoptic.png",
+            "full/panoptic.json",
+            "full/camera.json",
+        ],
+    )
+    scenes = {
+        "den": {"mode": "room", "capture": {"path": "den"}},
+        "full": {"mode": "room", "capture": {"path": "full"}},
+    }
+    result = dry_run(tmp_path, scenes)
+    assert "scene 'den': the room capture 'den' lacks a depth map (capture.depth, or depth.exr" in result.stdout
+    assert "panoptic.png and panoptic.json in the capture): the room stages will stop asking for them" in result.stdout
+    assert "scene 'den': no field of view" in result.stdout and "vanishing points" in result.stdout
+    assert "scene 'full': the room capture" not in result.stdout and "scene 'full': no field" not in result.stdout

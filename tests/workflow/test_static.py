@@ -180,7 +180,7 @@ BAD_CONFIGS = {
     "out of range": ({"render": {"spp": 0}}, ["config: render.spp: 0 is less than the minimum of 1"]),
     "unknown kind": (
         {"scenes": {"room": {"synthetic": {"kind": "castle"}}}},
-        ["config: scenes.room.synthetic.kind: 'castle' is not allowed; allowed: room, duplicates"],
+        ["config: scenes.room.synthetic.kind: 'castle' is not allowed; allowed: room, duplicates, room_photo"],
     ),
     "missing capture": (
         {"scenes": {"kitchen": {"capture": {"path": "no/such/capture"}}}},

@@ -146,9 +146,9 @@ _SCENE_SCHEMA = CONFIG_SCHEMA["properties"]["scenes"]["additionalProperties"]
 # stages land (`x-stages`): the schema says both, for the docs and for the messages here.
 CAPTURE_KEYS = _SCENE_SCHEMA["properties"]["capture"]["properties"]
 MODE_STAGES = _SCENE_SCHEMA["properties"]["mode"]["x-stages"]
-# The capture each generator kind makes. (Issue 16's rooms will make `room` captures as well:
-# one photograph with depth and segmentation.)
-KIND_MODE = {"room": "multiview", "duplicates": "duplicates"}
+# The capture each generator kind makes (room_photo: one photograph with depth, segmentation and
+# field of view, workflow/invrender/scene/room_photo.py's layout).
+KIND_MODE = {"room": "multiview", "duplicates": "duplicates", "room_photo": "room"}
 # Image files a capture's images/ may hold, the preferred first: an EXR before its PNG preview.
 IMAGE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 MESH_NAMES = ("mesh.ply", "mesh.obj")
@@ -238,13 +238,21 @@ def _check_generator_config(name):
     says which) or a value of another type than the default's is named now, not in a job.
     """
     try:
-        from invrender.synthesize import DUPLICATES_DEFAULTS, ROOM_DEFAULTS
+        from invrender.synthesize import (
+            DUPLICATES_DEFAULTS,
+            ROOM_DEFAULTS,
+            ROOM_PHOTO_DEFAULTS,
+        )
         from invrender.synthesize.room import merge_config
     except ImportError:
         # snakemake runs outside the package's environment: the synthesize job checks
         return
     synthetic = SCENES[name]["synthetic"]
-    kinds = {"room": ROOM_DEFAULTS, "duplicates": DUPLICATES_DEFAULTS}
+    kinds = {
+        "room": ROOM_DEFAULTS,
+        "duplicates": DUPLICATES_DEFAULTS,
+        "room_photo": ROOM_PHOTO_DEFAULTS,
+    }
     defaults = kinds[synthetic["kind"]]
     where = f"scenes.{name}.synthetic.config"
     try:
@@ -423,6 +431,12 @@ def _check_photograph(name, capture):
                 f"not set, and {str(Path(path, 'images'))!r} holds {len(images)} images "
                 f"({names}), not one: a {mode(name)} scene is one photograph; name it",
             )
+    _check_lens(name, capture)
+
+
+def _check_lens(name, capture):
+    """A field of view or a focal length, not both, and not beside a camera model."""
+    path = capture["path"]
     given = [key for key in ("field_of_view", "focal_length") if key in capture]
     if len(given) == 2:
         _refuse(
@@ -444,13 +458,52 @@ def _check_duplicates(name, capture):
             _refuse(name, "capture.masks", f"{str(masks)!r} holds no PNG")
 
 
+# The room capture's own layout (scene/room_photo.py): files at the top of the capture, found
+# without a key naming them.
+ROOM_PHOTOS = ("photo.exr", "photo.png", "photo.jpg", "photo.jpeg")
+ROOM_DEPTH = "depth.exr"
+ROOM_SEGMENTATION = ("panoptic.png", "panoptic.json")
+
+
 def _check_room(name, capture):
-    _check_photograph(name, capture)
+    """The photograph (photo.exr/png/jpg, or images/ with one, or `image`); depth and a panoptic
+    segmentation named or in the capture's layout. What is missing is said now: the room stages
+    will stop without depth or segmentation (nothing here can estimate them), and estimate a
+    missing field of view from vanishing points."""
+    path = Path(capture["path"])
+    if "image" in capture or not any((path / photo).is_file() for photo in ROOM_PHOTOS):
+        _check_photograph(name, capture)
+    else:
+        _check_lens(name, capture)
     if "depth" in capture:
         _named_file(name, "depth", (".exr",))
     if "segmentation" in capture:
         _named_file(name, "segmentation.ids", (".png",))
         _named_file(name, "segmentation.labels", (".json", ".csv"))
+    missing = []
+    if "depth" not in capture and not (path / ROOM_DEPTH).is_file():
+        missing.append(
+            f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
+        )
+    if "segmentation" not in capture and not all(
+        (path / f).is_file() for f in ROOM_SEGMENTATION
+    ):
+        missing.append(
+            "a panoptic segmentation (capture.segmentation {ids, labels}, or "
+            f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"
+        )
+    if missing:
+        logger.warning(
+            f"config: scene {name!r}: the room capture {str(path)!r} lacks "
+            f"{' and '.join(missing)}: the room stages will stop asking for "
+            f"{'them' if len(missing) > 1 else 'it'} (no estimator can be downloaded here)"
+        )
+    given = any(key in capture for key in ("field_of_view", "focal_length"))
+    if not (given or cameras_file(path) or (path / "camera.json").is_file()):
+        logger.info(
+            f"config: scene {name!r}: no field of view (capture.field_of_view, focal_length or "
+            "camera.json): the room stages estimate it from vanishing points"
+        )
 
 
 MODE_CHECKS = {
@@ -519,7 +572,11 @@ def lens(scene):
 
 
 def has_cameras(scene):
-    if is_synthetic(scene) or lens(scene):
+    """A COLMAP model or a lens for the cameras rule. A synthetic room photo has neither: its
+    field of view is in camera.json, which the room stages read (with the photo)."""
+    if is_synthetic(scene):
+        return mode(scene) != "room"
+    if lens(scene):
         return True
     return cameras_file(SCENES[scene]["capture"]["path"]) is not None
 

@@ -1,10 +1,12 @@
 rule synthesize:
-    """A parametric scene rendered into a capture (images, COLMAP cameras, mesh.ply), with its
-    ground truth beside it: the demo's stand-in for a capture a user brings."""
+    """A parametric scene rendered into a capture (images, COLMAP cameras, mesh.ply; a room
+    photo: photo, depth, panoptic segmentation, camera.json), with its ground truth beside it:
+    the demo's stand-in for a capture a user brings."""
     output:
         report(
             directory("results/{scene}/capture"),
-            patterns=["images/{view,[^/]+}.png"],
+            # images/: the views of a multiview or duplicates capture; photo.png: a room photo
+            patterns=["images/{view,[^/]+}.png", "{view,photo}.png"],
             caption="../report/capture.rst",
             category="Capture",
             subcategory="{scene}",

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .images import check_finite, read_image, read_mask, write_exr, write_mask, write_png_preview
 from .atomic import atomic_path
+from .images import check_finite, read_image, read_mask, write_exr, write_mask, write_png_preview
 from .types import SceneError
 
 __all__ = [
@@ -124,8 +124,11 @@ class RoomPhoto:
             return self.fov_y_deg, "given"
         from .vanishing import estimate_fov
 
-        log.info("%s: no field of view given (camera.json or the config's capture.field_of_view): "
-                 "estimating it from vanishing points", self.paths.get("photo"))
+        log.info(
+            "%s: no field of view given (camera.json or the config's capture.field_of_view): "
+            "estimating it from vanishing points",
+            self.paths.get("photo"),
+        )
         estimate = estimate_fov(self.image)
         if estimate is None:
             raise SceneError(

@@ -10,7 +10,8 @@ the focal length f with
     a1 a2 + b1 b2 + w1 w2 f^2 = 0.
 
 Steps: line segments by OpenCV's fast line detector (ximgproc, from opencv-contrib; LSD where it
-is absent) on the photograph in sRGB, lightly blurred against render noise; vanishing points by
+is absent) on the photograph in sRGB, lightly blurred against render noise and contrast-equalised
+(CLAHE) so that lines in shadow count; vanishing points by
 RANSAC over pairs of segments, each scored by the length of the segments that point at it (greedy:
 a found point's segments are removed). Then a search over Manhattan frames rather than a solve from
 one pair: one direction is a found vanishing point (each of the three strongest is tried), the
@@ -59,6 +60,9 @@ def detect_segments(image: np.ndarray, min_length: float | None = None) -> np.nd
     level = float(np.percentile(grey, 99)) or 1.0
     grey8 = np.round(linear_to_srgb(grey / level) * 255).astype(np.uint8)
     grey8 = cv2.GaussianBlur(grey8, (0, 0), 1.0)
+    # Local contrast: a room's lines in shadow (a wainscot, a wall corner) are as telling as those
+    # in the light; measured on the synthetic rooms, it halves the worst error.
+    grey8 = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(grey8)
     h, w = grey8.shape
     min_length = 0.02 * math.hypot(w, h) if min_length is None else min_length
     if hasattr(cv2, "ximgproc"):
@@ -167,7 +171,9 @@ def _focal_of_fov(fov_y_deg, h: float, scale: float):
     return h / 2 / np.tan(np.radians(fov_y_deg) / 2) / scale
 
 
-def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3, seed: int = 0) -> VanishingEstimate | None:
+def estimate_fov(
+    image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3, seed: int = 0
+) -> VanishingEstimate | None:
     """The vertical field of view of a photograph (linear RGB, (H, W, 3)): the focal length of the
     Manhattan frame that the most segment length points into.
 
@@ -188,7 +194,9 @@ def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3
     coarse_fov = np.arange(FOV_RANGE_DEG[0], FOV_RANGE_DEG[1] + 0.5, 2.0)
     coarse_theta = np.radians(np.arange(0.0, 90.0, 2.0))
     for k in range(min(anchors, len(points))):
-        scores = _frame_scores(centred, length, points[k], _focal_of_fov(coarse_fov, h, scale), coarse_theta, max_angle_deg)
+        scores = _frame_scores(
+            centred, length, points[k], _focal_of_fov(coarse_fov, h, scale), coarse_theta, max_angle_deg
+        )
         i, j = np.unravel_index(np.argmax(scores), scores.shape)
         fine_fov = coarse_fov[i] + np.arange(-2.0, 2.01, 0.1)
         fine_theta = coarse_theta[j] + np.radians(np.arange(-2.0, 2.01, 0.2))
@@ -198,5 +206,7 @@ def estimate_fov(image: np.ndarray, max_angle_deg: float = 1.5, anchors: int = 3
             best = (scores[i, j], fine_fov[i], k)
     _, fov_y, anchor = best
     focal = float(h / 2 / math.tan(math.radians(fov_y) / 2))
-    log.info("field of view from vanishing points: %.1f deg vertical (f = %.1f px, %d segments)", fov_y, focal, len(seg))
+    log.info(
+        "field of view from vanishing points: %.1f deg vertical (f = %.1f px, %d segments)", fov_y, focal, len(seg)
+    )
     return VanishingEstimate(float(fov_y), focal, points, weights, anchor, len(seg))

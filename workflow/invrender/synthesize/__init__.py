@@ -18,4 +18,14 @@ from .room import ROOM_DEFAULTS, make_room
 from .room_photo import ROOM_PHOTO_DEFAULTS, make_room_photo
 from .stage import KINDS, run
 
-__all__ = ["KINDS", "run", "make_room", "make_duplicates", "write_capture", "ROOM_DEFAULTS", "DUPLICATES_DEFAULTS", "make_room_photo", "ROOM_PHOTO_DEFAULTS"]
+__all__ = [
+    "KINDS",
+    "run",
+    "make_room",
+    "make_duplicates",
+    "write_capture",
+    "ROOM_DEFAULTS",
+    "DUPLICATES_DEFAULTS",
+    "make_room_photo",
+    "ROOM_PHOTO_DEFAULTS",
+]

@@ -37,7 +37,7 @@ import numpy as np
 from ..scene.atlas import rasterize_atlas, triangle_areas, unwrap
 from ..scene.cameras import project_points
 from ..scene.types import Maps, Mesh, Scene
-from .primitives import BOX_SIDES, CYLINDER_PARTS, PLANE_AXES, axis_grid, box, cylinder, subdivide_breaks
+from ..assets.primitives import BOX_SIDES, CYLINDER_PARTS, PLANE_AXES, axis_grid, box, cylinder, subdivide_breaks
 from .room import ENVIRONMENT_DEFAULTS, Material, bake_materials, merge_config, pinhole_camera, sky_cube_map
 
 __all__ = [

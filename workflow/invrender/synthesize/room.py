@@ -28,7 +28,7 @@ from ..scene.atlas import bake, rasterize_atlas, unwrap
 from ..scene.cameras import look_at, pinhole_camera
 from ..scene.cubemap import texel_directions
 from ..scene.types import Camera, Maps, Mesh, Scene
-from .primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
+from ..assets.primitives import Primitive, axis_grid, box, concatenate, subdivide_breaks
 
 __all__ = [
     "ROOM_DEFAULTS",

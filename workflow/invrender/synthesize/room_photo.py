@@ -7,16 +7,16 @@ resolution. The renderer gives the photograph, its depth (camera z) and its pano
 instance-id AOV: every face's instance id is its segment's id), so the three agree exactly.
 
 Layouts (``ROOM_PHOTO_LAYOUTS``, config ``layout``) differ in size, window wall, lights,
-furniture and camera; any key of the config overrides the layout's. Objects:
+furniture and camera; any key of the config overrides the layout's. Furniture comes from the
+asset library (``assets/``: unit-normalised procedural pieces, front towards +z):
 
-    {"name": "sofa", "kind": "box" | "table" | "chair", "size": [x, y, z] (own frame, meters),
-     "position": [x, z] (footprint centre), "yaw_deg": a, "on": "floor" | another object's name}
+    {"name": "sofa", "asset": "sofa_b", "scale": 2.0 (meters, the largest extent; default the
+     asset's nominal size), "position": [x, z] (footprint centre), "yaw_deg": a,
+     "on": "floor" | another object's name}
 
-An object's own frame: footprint centred at the origin, standing on y = 0, a chair's back
-towards -z. World = R_y(yaw) (own) + position, R_y(a) = [[cos a, 0, sin a], [0, 1, 0],
-[-sin a, 0, cos a]] (counter-clockwise seen from above, +Y up); position's y is its support's top.
-Truth ``scale`` is the largest extent of ``size`` (the asset library's unit-normalised meshes
-scaled by it give the object).
+World = R_y(yaw) (scale * unit mesh) + position, R_y(a) = [[cos a, 0, sin a], [0, 1, 0],
+[-sin a, 0, cos a]] (counter-clockwise seen from above, +Y up); position's y is its support's
+top. A lamp's shade emits and its segment is of class ``lamp``.
 """
 
 from __future__ import annotations
@@ -27,10 +27,11 @@ import logging
 
 import numpy as np
 
+from ..assets.library import library
+from ..assets.primitives import Primitive, concatenate
 from ..scene.atlas import rasterize_atlas, unwrap
 from ..scene.room_photo import fov_y_to_x
 from ..scene.types import Maps, Mesh, Scene
-from .primitives import Primitive, box, concatenate
 from .room import (
     ENVIRONMENT_DEFAULTS,
     ROOM_DEFAULTS,
@@ -38,7 +39,6 @@ from .room import (
     Material,
     _checker,
     _room_geometry,
-    _table,
     _wood_grain,
     bake_materials,
     merge_config,
@@ -46,11 +46,16 @@ from .room import (
     sky_cube_map,
 )
 
-__all__ = ["ROOM_PHOTO_DEFAULTS", "ROOM_PHOTO_LAYOUTS", "OBJECT_KINDS", "make_room_photo", "resolve_config", "yaw_matrix"]
+__all__ = [
+    "ROOM_PHOTO_DEFAULTS",
+    "ROOM_PHOTO_LAYOUTS",
+    "make_room_photo",
+    "resolve_config",
+    "yaw_matrix",
+    "write_room_capture",
+]
 
 log = logging.getLogger(__name__)
-
-OBJECT_KINDS = ("box", "table", "chair")
 
 ROOM_PHOTO_DEFAULTS = {
     "seed": 0,
@@ -75,12 +80,19 @@ ROOM_PHOTO_LAYOUTS = {
         "window": {"wall": "-z", "center": [0.3, 1.45], "size": [1.8, 1.2]},
         "lights": [{"center": [-0.8, -0.4], "size": [0.7, 0.7]}, {"center": [1.0, 0.6], "size": [0.5, 0.5]}],
         "objects": [
-            {"name": "sofa", "kind": "box", "size": [2.0, 0.8, 0.85], "position": [-2.0, 0.2], "yaw_deg": 90.0},
-            {"name": "coffee_table", "kind": "table", "size": [1.1, 0.45, 0.6], "position": [-0.5, 0.3], "yaw_deg": 85.0},
-            {"name": "crate", "kind": "box", "size": [0.35, 0.25, 0.3], "position": [-0.45, 0.35], "yaw_deg": 20.0,
-             "on": "coffee_table"},
-            {"name": "cabinet", "kind": "box", "size": [1.2, 0.9, 0.45], "position": [0.9, -1.7], "yaw_deg": 0.0},
-            {"name": "chair", "kind": "chair", "size": [0.5, 0.9, 0.5], "position": [1.1, -0.4], "yaw_deg": 200.0},
+            {"name": "sofa", "asset": "sofa_b", "position": [-1.95, 0.2], "yaw_deg": 90.0},
+            {"name": "coffee_table", "asset": "table_a", "scale": 1.1, "position": [-0.6, 0.3], "yaw_deg": 88.0},
+            {
+                "name": "crate",
+                "asset": "box_a",
+                "scale": 0.3,
+                "position": [-0.55, 0.35],
+                "yaw_deg": 20.0,
+                "on": "coffee_table",
+            },
+            {"name": "cabinet", "asset": "cabinet_a", "position": [0.9, -1.65], "yaw_deg": 0.0},
+            {"name": "armchair", "asset": "chair_c", "position": [1.0, -0.3], "yaw_deg": 215.0},
+            {"name": "floor_lamp", "asset": "lamp_a", "position": [-2.15, -1.6], "yaw_deg": 0.0},
         ],
         "camera": {"eye": [2.0, 1.5, 1.6], "target": [-0.8, 0.9, -1.3], "fov_y_deg": 55.0},
     },
@@ -89,13 +101,18 @@ ROOM_PHOTO_LAYOUTS = {
         "window": {"wall": "+x", "center": [-0.6, 1.4], "size": [1.2, 1.1]},
         "lights": [{"center": [0.0, -0.3], "size": [0.6, 0.9]}],
         "objects": [
-            {"name": "bed", "kind": "box", "size": [1.5, 0.55, 2.0], "position": [-0.8, -0.9], "yaw_deg": 0.0},
-            {"name": "nightstand", "kind": "box", "size": [0.45, 0.55, 0.4], "position": [0.3, -1.75], "yaw_deg": 0.0},
-            {"name": "book_box", "kind": "box", "size": [0.25, 0.12, 0.2], "position": [0.3, -1.75], "yaw_deg": 35.0,
-             "on": "nightstand"},
-            {"name": "desk", "kind": "table", "size": [1.1, 0.75, 0.55], "position": [1.45, 0.9], "yaw_deg": 90.0},
-            {"name": "desk_chair", "kind": "chair", "size": [0.45, 0.85, 0.45], "position": [0.85, 1.0],
-             "yaw_deg": 250.0},
+            {"name": "bed", "asset": "bed_b", "position": [-0.85, -0.95], "yaw_deg": 0.0},
+            {"name": "nightstand", "asset": "cabinet_c", "scale": 0.5, "position": [0.35, -1.8], "yaw_deg": 0.0},
+            {
+                "name": "book_box",
+                "asset": "box_a",
+                "scale": 0.22,
+                "position": [0.35, -1.8],
+                "yaw_deg": 35.0,
+                "on": "nightstand",
+            },
+            {"name": "desk", "asset": "desk_a", "scale": 1.2, "position": [1.5, 0.9], "yaw_deg": -90.0},
+            {"name": "desk_chair", "asset": "chair_a", "position": [0.85, 1.0], "yaw_deg": 100.0},
         ],
         "camera": {"eye": [-1.3, 1.55, 1.8], "target": [0.7, 0.9, -1.0], "fov_y_deg": 62.0},
     },
@@ -110,13 +127,20 @@ ROOM_PHOTO_LAYOUTS = {
         ],
         "light_radiance": 8.0,
         "objects": [
-            {"name": "desk_a", "kind": "table", "size": [1.4, 0.74, 0.7], "position": [-1.3, -1.2], "yaw_deg": 0.0},
-            {"name": "chair_a", "kind": "chair", "size": [0.5, 0.95, 0.5], "position": [-1.2, -0.5], "yaw_deg": 170.0},
-            {"name": "desk_b", "kind": "table", "size": [1.4, 0.74, 0.7], "position": [0.8, -1.3], "yaw_deg": -15.0},
-            {"name": "chair_b", "kind": "chair", "size": [0.5, 0.95, 0.5], "position": [0.9, -0.6], "yaw_deg": 150.0},
-            {"name": "shelf", "kind": "box", "size": [1.0, 1.9, 0.4], "position": [2.6, 0.6], "yaw_deg": 90.0},
-            {"name": "printer", "kind": "box", "size": [0.45, 0.3, 0.4], "position": [0.6, -1.35], "yaw_deg": 10.0,
-             "on": "desk_b"},
+            {"name": "desk_a", "asset": "desk_b", "position": [-1.3, -1.75], "yaw_deg": 0.0},
+            {"name": "chair_a", "asset": "chair_b", "position": [-1.2, -0.95], "yaw_deg": 170.0},
+            {"name": "desk_b", "asset": "desk_d", "position": [0.6, -1.6], "yaw_deg": -12.0},
+            {"name": "chair_b", "asset": "chair_d", "position": [0.7, -0.95], "yaw_deg": 150.0},
+            {"name": "shelf", "asset": "shelf_b", "position": [2.75, 0.6], "yaw_deg": -90.0},
+            {
+                "name": "printer",
+                "asset": "box_a",
+                "scale": 0.42,
+                "position": [0.5, -1.65],
+                "yaw_deg": 10.0,
+                "on": "desk_b",
+            },
+            {"name": "cabinet", "asset": "cabinet_b", "position": [-2.55, 1.2], "yaw_deg": 90.0},
         ],
         "camera": {"eye": [2.2, 1.7, 1.9], "target": [-1.0, 0.6, -1.2], "fov_y_deg": 50.0},
     },
@@ -146,27 +170,10 @@ def yaw_matrix(yaw_deg: float) -> np.ndarray:
 # ---------------------------------------------------------------------------- furniture
 
 
-def _chair(size, cell) -> Primitive:
-    """A seat on four legs with a back along -z, in its own frame (footprint centred, y = 0 up)."""
-    sx, sy, sz = size
-    seat_y, slab, leg = 0.5 * sy, 0.05, 0.04
-    lo, hi = np.array([-sx / 2, 0.0, -sz / 2]), np.array([sx / 2, seat_y, sz / 2])
-    seat = _table(lo, hi, cell, top=slab, leg=leg, inset=0.0)
-    back = box([-sx / 2, seat_y, -sz / 2], [sx / 2, sy, -sz / 2 + slab], cell=cell, omit=("-y",))
-    return concatenate([seat, back])
-
-
-def _object_mesh(kind: str, size, cell) -> Primitive:
-    """The object in its own frame."""
-    sx, sy, sz = size
-    lo, hi = np.array([-sx / 2, 0.0, -sz / 2]), np.array([sx / 2, sy, sz / 2])
-    if kind == "box":
-        return box(lo, hi, cell=cell, omit=("-y",))  # it rests on its support
-    if kind == "table":
-        return _table(lo, hi, cell)
-    if kind == "chair":
-        return _chair(size, cell)
-    raise ValueError(f"expected kind one of {OBJECT_KINDS}, got {kind!r}")
+def _assets(names) -> dict:
+    """The library's assets by name, for the names the objects use."""
+    found = {asset.name: asset for asset in library()}
+    return {name: found[name] for name in names if name in found}
 
 
 def _footprint(size, yaw_deg, position) -> np.ndarray:
@@ -181,11 +188,18 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
     the room and, for an object on another, inside that one's top."""
     sx, sy, sz = map(float, cfg["size"])
     placed, by_name = [], {}
+    assets = _assets({obj.get("asset") for obj in cfg["objects"]})
     for k, obj in enumerate(cfg["objects"]):
         where = f"config.objects[{k}] ({obj.get('name', '?')})"
-        size = np.asarray(obj["size"], np.float64)
-        if size.shape != (3,) or np.any(size <= 0):
-            raise ValueError(f"{where}.size: expected three positive extents")
+        if obj.get("asset") not in assets:
+            raise ValueError(
+                f"{where}.asset: expected an asset of the library (chair_a, table_b, ...), got {obj.get('asset')!r}"
+            )
+        asset = assets[obj["asset"]]
+        scale = float(obj.get("scale", asset.nominal_size))
+        if not scale > 0:
+            raise ValueError(f"{where}.scale: expected a positive size in meters")
+        size = asset.extent * scale
         if obj["name"] in by_name:
             raise ValueError(f"{where}.name: expected each name once")
         support = obj.get("on", "floor")
@@ -200,6 +214,9 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
             raise ValueError(f"{where}.on: expected 'floor' or the name of an earlier object, got {support!r}")
         position = np.array([x, y, z])
         corners = _footprint(size, yaw, position)
+        if np.any(np.abs(corners) > np.array([sx, sz]) / 2 - 0.01):  # the seeded shift never pushes into a wall
+            position[[0, 2]] -= shift
+            corners = _footprint(size, yaw, position)
         if np.any(np.abs(corners) > np.array([sx, sz]) / 2 - 0.01) or y + size[1] > sy - 0.05:
             raise ValueError(f"{where}: expected it inside the room (1 cm from the walls, below the ceiling)")
         if support != "floor":
@@ -207,8 +224,15 @@ def _place_objects(cfg: dict, rng: np.random.Generator) -> list[dict]:
             local = (corners - base["position"][[0, 2]]) @ yaw_matrix(base["yaw_deg"])[np.ix_([0, 2], [0, 2])]
             if np.any(np.abs(local) > base["size"][[0, 2]] / 2):
                 raise ValueError(f"{where}: expected its footprint on top of {support!r}")
-        entry = {"name": obj["name"], "kind": obj["kind"], "size": size, "position": position, "yaw_deg": yaw,
-                 "on": support}
+        entry = {
+            "name": obj["name"],
+            "asset": asset,
+            "scale": scale,
+            "size": size,
+            "position": position,
+            "yaw_deg": yaw,
+            "on": support,
+        }
         placed.append(entry)
         by_name[obj["name"]] = entry
     return placed
@@ -233,10 +257,10 @@ def _shell_segment_names(prim: Primitive, names: list[str], cfg: dict) -> list[s
     return out
 
 
-def _segment_class(name: str) -> str:
+def _segment_class(name: str, lamps: set[str]) -> str:
     if name.startswith("wall_"):
         return "wall"
-    if name.startswith("light_"):
+    if name.startswith("light_") or name in lamps:
         return "lamp"
     return SHELL_CLASSES.get(name, "object")
 
@@ -262,25 +286,62 @@ def _shell(cfg: dict, rng: np.random.Generator):
     return prim, names, materials, room_cfg
 
 
-PALETTE = np.array([[0.55, 0.22, 0.15], [0.20, 0.35, 0.55], [0.30, 0.50, 0.25], [0.65, 0.55, 0.25],
-                    [0.45, 0.45, 0.48], [0.60, 0.40, 0.50]])
+PALETTE = np.array(
+    [
+        [0.55, 0.22, 0.15],
+        [0.20, 0.35, 0.55],
+        [0.30, 0.50, 0.25],
+        [0.65, 0.55, 0.25],
+        [0.45, 0.45, 0.48],
+        [0.60, 0.40, 0.50],
+    ]
+)
 
 
-def _object_material(kind: str, k: int, room_cfg: dict) -> tuple[Material, dict]:
-    """The object's material and its truth description."""
-    if kind in ("table", "chair"):
-        return (Material(kd=_wood_grain(), ks=room_cfg["table_ks"], ka=room_cfg["table_ka"]),
-                {"kind": "wood_grain", "kd": [0.30, 0.18, 0.10], "ks": room_cfg["table_ks"], "ka": room_cfg["table_ka"]})
-    color = PALETTE[k % len(PALETTE)]
-    return (Material(kd=_checker(color), ks=room_cfg["ks"], ka=room_cfg["ka"]),
-            {"kind": "checker", "kd": color.tolist(), "cell": 0.15, "contrast": 0.7, "ks": room_cfg["ks"],
-             "ka": room_cfg["ka"]})
+WOOD_PARTS = {"legs", "top", "frame", "shelves", "base", "pole", "arms"}
+METAL_PARTS = {"handles"}
+LAMP_RADIANCE = 6.0  # ke of a lamp's shade (times the lights' colour)
+
+
+def _part_material(asset, part_name: str, color: np.ndarray, room_cfg: dict) -> tuple[Material, dict]:
+    """One part's material and its truth description: wood for structural parts, a metal for
+    handles, an emitting shade for a lamp, the object's checkered colour for the rest."""
+    if part_name in asset.emissive_parts:
+        ke = (LAMP_RADIANCE * np.asarray(room_cfg["light_color"])).tolist()
+        return (
+            Material(kd=0.8, ks=0.0, ka=room_cfg["emitter_ka"], ke=ke),
+            {"kind": "emitter", "kd": [0.8] * 3, "ke": ke},
+        )
+    if part_name in WOOD_PARTS:
+        return (
+            Material(kd=_wood_grain(), ks=room_cfg["table_ks"], ka=room_cfg["table_ka"]),
+            {"kind": "wood_grain", "kd": [0.30, 0.18, 0.10], "ks": room_cfg["table_ks"], "ka": room_cfg["table_ka"]},
+        )
+    if part_name in METAL_PARTS:
+        return (Material(kd=0.05, ks=0.6, ka=0.02), {"kind": "plain", "kd": [0.05] * 3, "ks": 0.6, "ka": 0.02})
+    return (
+        Material(kd=_checker(color), ks=room_cfg["ks"], ka=room_cfg["ka"]),
+        {
+            "kind": "checker",
+            "kd": color.tolist(),
+            "cell": 0.15,
+            "contrast": 0.7,
+            "ks": room_cfg["ks"],
+            "ka": room_cfg["ka"],
+        },
+    )
 
 
 SHELL_MATERIALS = {  # truth descriptions of room.py's shell materials
     "floor": {"kind": "wood_planks", "kd": [0.50, 0.32, 0.17], "plank_width": 0.18, "plank_length": 1.3},
-    "wall": {"kind": "striped_wall", "kd": [0.80, 0.76, 0.67], "kd_dark": [0.68, 0.64, 0.57],
-             "wainscot_kd": [0.42, 0.50, 0.56], "stripe": 0.15, "wainscot": 0.9},
+    "wall": {
+        "kind": "striped_wall",
+        "kd": [0.80, 0.76, 0.67],
+        "kd_dark": [0.68, 0.64, 0.57],
+        "wainscot_kd": [0.42, 0.50, 0.56],
+        "stripe": 0.15,
+        "wainscot": 0.9,
+    },
     "ceiling": {"kind": "plain", "kd": [0.85, 0.85, 0.83]},
     "window": {"kind": "window", "kw": 1.0},
 }
@@ -312,21 +373,26 @@ def make_room_photo(config: dict | None = None) -> tuple[Scene, dict]:
     pieces, parts = [shell], [shell.part]
     truth_materials = {}
     for k, obj in enumerate(objects):
-        part = len(part_names)
-        part_names.append(obj["name"])
-        own = _object_mesh(obj["kind"], obj["size"], cfg["cell"])
+        asset = obj["asset"]
         world = np.eye(4)
-        world[:3, :3], world[:3, 3] = yaw_matrix(obj["yaw_deg"]), obj["position"]
-        mesh = own.transformed(world)
+        world[:3, :3], world[:3, 3] = yaw_matrix(obj["yaw_deg"]) * obj["scale"], obj["position"]
+        mesh = asset.mesh.transformed(world)
+        color = PALETTE[k % len(PALETTE)]
+        for p, part_name in enumerate(asset.part_names):  # one material group per (object, part)
+            part_names.append(f"{obj['name']}.{part_name}")
+            materials[len(part_names) - 1], truth_materials[part_names[-1]] = _part_material(
+                asset, part_name, color, room_cfg
+            )
+        first = len(part_names) - len(asset.part_names)
         pieces.append(mesh)
-        parts.append(np.full(len(mesh.faces), part, np.int32))
+        parts.append((first + mesh.part).astype(np.int32))
         segment_of_face += [obj["name"]] * len(mesh.faces)
-        materials[part], truth_materials[obj["name"]] = _object_material(obj["kind"], k, room_cfg)
     prim = concatenate(pieces)
     part = np.concatenate(parts)
 
     order_names = ["floor", "ceiling", *(f"wall_{w}" for w in WALL_NAMES), "window"]
     order_names += [n for n in part_names if n.startswith("light_")] + [o["name"] for o in objects]
+    lamps = {o["name"] for o in objects if o["asset"].emissive_parts}
     seen = set(segment_of_face)
     segment_names = [n for n in order_names if n in seen]
     segment_id = {name: i + 1 for i, name in enumerate(segment_names)}
@@ -336,13 +402,14 @@ def make_room_photo(config: dict | None = None) -> tuple[Scene, dict]:
     order = np.argsort(part, kind="stable")
     faces, part, face_segment = prim.faces[order], part[order], face_segment[order]
     atlas = unwrap(prim.positions, faces, resolution=int(cfg["atlas_resolution"]), padding=2, groups=part)
-    mesh = Mesh(positions=atlas.positions.astype(np.float32), faces=atlas.faces, uvs=atlas.uvs,
-                instance_ids=face_segment)
+    mesh = Mesh(
+        positions=atlas.positions.astype(np.float32), faces=atlas.faces, uvs=atlas.uvs, instance_ids=face_segment
+    )
     texels = rasterize_atlas(mesh, atlas.height, atlas.width)
     maps = Maps(**bake_materials(texels, part, materials, dilation=2), kg=sky_cube_map(cfg["environment"]))
     scene = Scene(mesh=mesh, maps=maps, cameras=[camera])
 
-    segments = [{"id": segment_id[n], "class": _segment_class(n), "name": n} for n in segment_names]
+    segments = [{"id": segment_id[n], "class": _segment_class(n, lamps), "name": n} for n in segment_names]
     truth = _truth(cfg, room_cfg, objects, segment_id, camera, truth_materials)
     metadata = {
         "generator": "invrender.synthesize.room_photo",
@@ -367,10 +434,11 @@ def _truth(cfg, room_cfg, objects, segment_id, camera, truth_materials) -> dict:
             {
                 "segment": segment_id[obj["name"]],
                 "name": obj["name"],
-                "asset": obj["kind"],
+                "asset": obj["asset"].name,
+                "category": obj["asset"].category,
                 "position": obj["position"].tolist(),
                 "yaw_deg": float(obj["yaw_deg"]),
-                "scale": float(obj["size"].max()),
+                "scale": float(obj["scale"]),
                 "size": obj["size"].tolist(),
                 "support": support,
             }
@@ -388,12 +456,32 @@ def _truth(cfg, room_cfg, objects, segment_id, camera, truth_materials) -> dict:
                 "color": list(map(float, room_cfg["light_color"])),
             }
         )
+    for obj in objects:  # a floor lamp's shade
+        for part in obj["asset"].emissive_parts:
+            lights.append(
+                {
+                    "kind": "lamp",
+                    "segment": segment_id[obj["name"]],
+                    "object": obj["name"],
+                    "part": part,
+                    "ke": truth_materials[f"{obj['name']}.{part}"]["ke"],
+                }
+            )
     win = cfg["window"]
-    lights.append({"kind": "window", "segment": segment_id.get("window"), "wall": win["wall"],
-                   "center": list(map(float, win["center"])), "size": list(map(float, win["size"]))})
+    lights.append(
+        {
+            "kind": "window",
+            "segment": segment_id.get("window"),
+            "wall": win["wall"],
+            "center": list(map(float, win["center"])),
+            "size": list(map(float, win["size"])),
+        }
+    )
     lights.append({"kind": "environment", **copy.deepcopy(cfg["environment"])})
-    materials = {name: dict(desc, ks=room_cfg["ks"], ka=room_cfg["ka"]) if name != "window" else dict(desc)
-                 for name, desc in SHELL_MATERIALS.items()}
+    materials = {
+        name: dict(desc, ks=room_cfg["ks"], ka=room_cfg["ka"]) if name != "window" else dict(desc)
+        for name, desc in SHELL_MATERIALS.items()
+    }
     materials.update(truth_materials)
     return {
         "box": {"center": [0.0, sy / 2, 0.0], "size": [sx, sy, sz], "yaw_deg": 0.0},

@@ -1,11 +1,11 @@
-"""synthesize.primitives: orientation (counter-clockwise fronts outwards), watertightness, labels."""
+"""assets.primitives: orientation (counter-clockwise fronts outwards), watertightness, labels."""
 
 from collections import Counter
 
 import numpy as np
 import pytest
 
-from invrender.synthesize.primitives import (
+from invrender.assets.primitives import (
     BOX_SIDES,
     axis_grid,
     box,
