@@ -76,14 +76,14 @@ def test_without_a_ceiling_the_height_is_1_2_times_the_top_point():
 def test_refinement_lowers_the_corner_error_from_a_wrong_start():
     """2 % depth noise, a start 8 degrees off in yaw, 10 % off in size and 20 cm off in place:
     Eq. 2 through render_masks_depth brings the corners in view from 22 cm to within 5 cm (measured
-    3.0 cm), and the mean over all eight corners down (measured 0.48 -> 0.12 m: the sides behind the
+    2.8 cm), and the mean over all eight corners down (measured 0.48 -> 0.22 m: the sides behind the
     camera have no gradient and keep the start's error)."""
     camera = truth_camera()
     classes, _, depth, _ = box_photo(camera, noise=0.02, seed=3)
     start = RoomBox(TRUTH.center + [0.2, -0.05, -0.15], TRUTH.size * [0.9, 1.05, 1.1], TRUTH.yaw_deg + 8.0)
     targets = reduced_targets(classes, depth.astype(np.float64), camera, 64)
     refined, history = refine_box(start, targets, RefineSettings(iterations=40, learning_rate=0.04), seed=0)
-    before, after = truth_metrics(start, camera, TRUTH, camera), truth_metrics(refined, camera, TRUTH, camera)
+    before, after = truth_metrics(start, camera, TRUTH, camera), truth_metrics(*refined.upright(camera), TRUTH, camera)
     assert (
         after["visible_corner_error"] < 0.05 and after["visible_corner_error"] < 0.25 * before["visible_corner_error"]
     )
@@ -97,17 +97,19 @@ def test_stage_writes_the_box_the_camera_and_both_fits_metrics(tmp_path):
     of both boxes against the truth; the figure."""
     capture = write_capture(tmp_path / "capture", noise=0.01)
     out = tmp_path / "room_box"
-    report = stage.run(capture, out, refine=RefineSettings(iterations=8, max_width=48))
+    report = stage.run(capture, out, refine=RefineSettings(iterations=20, max_width=64))
     assert json.loads((out / "room.json").read_text()) == report
     box = RoomBox.from_json(report["box"])
-    assert box.yaw_deg == 0 and box.center[[0, 2]].tolist() == [0, 0] and box.center[1] == box.size[1] / 2
+    assert (
+        box.yaw_deg == 0 and box.center[[0, 2]].tolist() == [0, 0] and box.center[1] == pytest.approx(box.size[1] / 2)
+    )
     camera = truth_camera()
     camera.R, camera.t = np.array(report["camera"]["R"]), np.array(report["camera"]["t"])
     assert report["camera"]["center"][1] == pytest.approx(truth_camera().center[1], abs=0.02)  # the height, meters
     classes, _, _, _ = box_photo(truth_camera())
     labels = cast_box(box, camera)[0]
     assert (labels == classes)[classes >= 0].mean() > 0.99
-    assert len(report["losses"]) == 8 and report["truth"] == str(capture / "truth")
+    assert len(report["losses"]) == 20 and report["truth"] == str(capture / "truth")
     for which in ("coarse", "refined"):
         m = report["metrics"][which]
         assert set(m["mask_iou"]) == {"wall", "floor", "ceiling"} and min(m["mask_iou"].values()) > 0.95
@@ -186,5 +188,5 @@ def test_refinement_keeps_the_camera_inside_the_box():
     assert not (np.abs(local) < start.size / 2).all()
     targets = reduced_targets(classes, depth.astype(np.float64), camera, 32)
     refined, _ = refine_box(start, targets, RefineSettings(iterations=1), seed=0)
-    local = rotation_y(np.radians(-refined.yaw_deg)) @ (camera.center - refined.center)
-    assert (np.abs(local) <= refined.size / 2 - 0.05 + 1e-9).all()
+    box, posed = refined.upright(camera)
+    assert (np.abs(posed.center - box.center) <= box.size / 2 - 0.05 + 1e-9).all()

@@ -22,6 +22,7 @@ from ..scene.types import Camera
 __all__ = [
     "BOX_CLASSES",
     "RoomBox",
+    "OrientedBox",
     "rotation_y",
     "box_corners",
     "box_mesh",
@@ -56,6 +57,25 @@ class RoomBox:
     @classmethod
     def from_json(cls, doc: dict) -> RoomBox:
         return cls(doc["center"], doc["size"], doc.get("yaw_deg", 0.0))
+
+
+@dataclass
+class OrientedBox:
+    """A box at any rotation (the refinement's result before the world is turned to make it
+    upright): world = rotation @ (size * v) + center."""
+
+    rotation: np.ndarray  # (3, 3)
+    center: np.ndarray  # (3,)
+    size: np.ndarray  # (3,)
+
+    def upright(self, camera: Camera) -> tuple[RoomBox, Camera]:
+        """The same box and camera in the world where the box has yaw 0 and no tilt, its floor at
+        y = 0 and its centre above the origin: p' = rotation^T (p - o), o its floor's centre."""
+        origin = self.center - self.rotation @ np.array([0.0, self.size[1] / 2, 0.0])
+        R = np.asarray(camera.R) @ self.rotation
+        t = np.asarray(camera.R) @ origin + np.asarray(camera.t)
+        moved = Camera(camera.name, camera.model, camera.width, camera.height, camera.params, R, t)
+        return RoomBox([0.0, self.size[1] / 2, 0.0], self.size, 0.0), moved
 
 
 def rotation_y(yaw_rad: float) -> np.ndarray:

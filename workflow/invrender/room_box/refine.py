@@ -13,11 +13,13 @@ sides, as the room was not empty", and comparing the box's wall with a wall mask
 would pull the box towards the holes. Targets are taken at a reduced resolution (whole blocks of
 pixels averaged: fractional targets and weights), which is what the refinement can afford.
 
-theta is the upright box by its yaw about +Y (radians) and the positions of its six sides along
-its own axes (the box is {R_y(yaw) q : low <= q <= high}); the renderer's 9-vector per part is
-[centre, (0, yaw, 0), log size], so the box stays on the floor's normal. Sides rather than centre
-and size: a side the photo does not show (the wall behind the camera) gets no gradient and stays
-where the coarse fit put it, instead of drifting with the centre.
+theta is the box's pose as the paper optimises it ("rotation, translation and scaling"): its
+rotation as an axis-angle r, the renderer's own, and the positions of its six sides along its own
+axes (the box is {R(r) q : low <= q <= high}), 9 numbers; the renderer's 9-vector per part is
+[R(r) (low + high) / 2, r, log(high - low)]. The rotation is free, not only the yaw: a floor plane
+that a distorted depth tilted is corrected by the masks. Sides rather than centre and size: a
+side the photo does not show (the wall behind the camera) gets no gradient and stays where the
+coarse fit put it, instead of drifting with the centre.
 Adam with a learning rate decaying linearly to a tenth; each step renders with a new seed; after
 each step the sides are projected to keep the camera inside the box.
 """
@@ -31,8 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..render.silhouette import rotation_matrix
 from ..scene.types import Camera
-from .box import BOX_CLASSES, RoomBox, box_mesh, rotation_y
+from .box import BOX_CLASSES, OrientedBox, RoomBox, box_mesh, rotation_y
 
 __all__ = ["RefineSettings", "Targets", "reduced_targets", "box_loss", "refine_box", "theta_of", "box_of"]
 
@@ -42,7 +45,7 @@ logger = logging.getLogger(__name__)
 @dataclass
 class RefineSettings:
     iterations: int = 60
-    learning_rate: float = 0.01
+    learning_rate: float = 0.02
     spp: int = 4  # samples per pixel of each render (the edges get their own samples)
     max_width: int = 128  # the targets' width after block averaging, at most
     depth_weight: float = 1.0  # Eq. 2 weighs the two terms equally
@@ -115,29 +118,38 @@ def box_loss(masks, depth, targets: Targets, depth_weight: float = 1.0):
     return loss, {"iou": ious, "depth_l1": float(l1.detach())}
 
 
-def _rotation_y(yaw: torch.Tensor) -> torch.Tensor:
-    c, s, zero, one = torch.cos(yaw), torch.sin(yaw), torch.zeros_like(yaw), torch.ones_like(yaw)
-    return torch.stack([torch.stack([c, zero, s]), torch.stack([zero, one, zero]), torch.stack([-s, zero, c])])
+def _rodrigues(r: torch.Tensor) -> torch.Tensor:
+    """render/silhouette.py's rotation_matrix in torch: the rotation by |r| about r / |r|."""
+    theta2 = (r * r).sum()
+    zero = r.new_zeros(())
+    K = torch.stack(
+        [torch.stack([zero, -r[2], r[1]]), torch.stack([r[2], zero, -r[0]]), torch.stack([-r[1], r[0], zero])]
+    )
+    small = theta2 < 1e-12  # the series, where sin(t) / t and (1 - cos t) / t^2 lose their digits
+    theta = torch.sqrt(torch.where(small, torch.ones_like(theta2), theta2))
+    a = torch.where(small, 1 - theta2 / 6, torch.sin(theta) / theta)
+    b = torch.where(small, 0.5 - theta2 / 24, (1 - torch.cos(theta)) / theta**2)
+    return torch.eye(3, dtype=r.dtype) + a * K + b * (K @ K)
 
 
 def theta_of(box: RoomBox) -> torch.Tensor:
-    """[yaw, low sides (3), high sides (3)]: the box is {R_y(yaw) q : low <= q <= high}."""
+    """[axis-angle (3), low sides (3), high sides (3)] of an upright box: the box is
+    {R(r) q : low <= q <= high}, r = (0, yaw, 0)."""
     yaw = np.radians(box.yaw_deg)
     middle = rotation_y(-yaw) @ box.center
-    return torch.tensor([yaw, *(middle - box.size / 2), *(middle + box.size / 2)], dtype=torch.float64)
+    return torch.tensor([0.0, yaw, 0.0, *(middle - box.size / 2), *(middle + box.size / 2)], dtype=torch.float64)
 
 
-def box_of(theta: torch.Tensor) -> RoomBox:
-    yaw, low, high = (v.detach().cpu().numpy().astype(np.float64) for v in (theta[0], theta[1:4], theta[4:7]))
-    return RoomBox(rotation_y(float(yaw)) @ ((low + high) / 2), high - low, np.degrees(float(yaw)))
+def box_of(theta: torch.Tensor) -> OrientedBox:
+    r, low, high = (v.detach().cpu().numpy().astype(np.float64) for v in (theta[:3], theta[3:6], theta[6:9]))
+    rotation = rotation_matrix(r)
+    return OrientedBox(rotation, rotation @ ((low + high) / 2), high - low)
 
 
 def _pose(theta: torch.Tensor) -> torch.Tensor:
-    """The renderer's [t, axis-angle, log s] of the upright box."""
-    yaw, low, high = theta[0], theta[1:4], theta[4:7]
-    zero = theta.new_zeros(1)
-    center = _rotation_y(yaw) @ ((low + high) / 2)
-    return torch.cat([center, zero, yaw.reshape(1), zero, torch.log(high - low)]).reshape(1, 9)
+    """The renderer's [t, axis-angle, log s] of the box."""
+    r, low, high = theta[:3], theta[3:6], theta[6:9]
+    return torch.cat([_rodrigues(r) @ ((low + high) / 2), r, torch.log(high - low)]).reshape(1, 9)
 
 
 def _keep_camera_inside(theta: torch.Tensor, camera_center: np.ndarray, margin: float) -> None:
@@ -146,9 +158,9 @@ def _keep_camera_inside(theta: torch.Tensor, camera_center: np.ndarray, margin: 
     little of or not at all) would turn the box inside out in one step: the renderer would then
     see the box's outside, a wall over the whole photo."""
     with torch.no_grad():
-        inside = rotation_y(-float(theta[0])) @ np.asarray(camera_center, np.float64)
-        theta[1:4] = torch.minimum(theta[1:4], torch.as_tensor(inside - margin))
-        theta[4:7] = torch.maximum(theta[4:7], torch.as_tensor(inside + margin))
+        inside = rotation_matrix(theta[:3].numpy()).T @ np.asarray(camera_center, np.float64)
+        theta[3:6] = torch.minimum(theta[3:6], torch.as_tensor(inside - margin))
+        theta[6:9] = torch.maximum(theta[6:9], torch.as_tensor(inside + margin))
 
 
 def refine_box(
@@ -158,7 +170,7 @@ def refine_box(
     seed: int = 0,
     render=None,
     log: logging.Logger = logger,
-) -> tuple[RoomBox, list[dict]]:
+) -> tuple[OrientedBox, list[dict]]:
     """Adam on Eq. 2 from ``box``; returns the refined box and the loss at each step. ``render``
     is render_masks_depth's signature (the default; tests may pass the same function)."""
     if render is None:

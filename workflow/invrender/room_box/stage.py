@@ -32,12 +32,12 @@ from ..scene.cameras import read_cameras
 from ..scene.room_photo import fov_x_to_y, load_room_photo
 from ..scene.types import Camera, SceneError, require_positive
 from ..segment.opencv import to_srgb8
-from .box import BOX_CLASSES, RoomBox, box_corners, rotation_y
+from .box import BOX_CLASSES, RoomBox, box_corners
 from .coarse import CoarseSettings, fit_coarse_box
 from .metrics import image_metrics, truth_metrics, truth_scale
 from .refine import RefineSettings, reduced_targets, refine_box
 
-__all__ = ["run", "photo_camera", "canonical", "read_truth"]
+__all__ = ["run", "photo_camera", "read_truth", "room_figure"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,22 +49,6 @@ def photo_camera(width: int, height: int, fov_y_deg: float) -> Camera:
     f = 0.5 * height / np.tan(np.radians(fov_y_deg) / 2)
     params = np.array([f, f, width / 2, height / 2])
     return Camera("photo", "PINHOLE", int(width), int(height), params, np.eye(3), np.zeros(3))
-
-
-def canonical(box: RoomBox, camera: Camera, others: list[RoomBox] = ()) -> tuple[RoomBox, Camera, list[RoomBox]]:
-    """The same room in the world where ``box`` has yaw 0, its floor at y = 0 and its centre
-    above the origin: p' = R_y(-yaw) (p - o), o the centre of its floor."""
-    yaw = np.radians(box.yaw_deg)
-    origin = box.center - np.array([0.0, box.size[1] / 2, 0.0])
-    to_new = rotation_y(-yaw)
-    R = np.asarray(camera.R) @ rotation_y(yaw)
-    t = np.asarray(camera.R) @ origin + np.asarray(camera.t)
-    moved = Camera(camera.name, camera.model, camera.width, camera.height, camera.params, R, t)
-
-    def move(b: RoomBox) -> RoomBox:
-        return RoomBox(to_new @ (b.center - origin), b.size, b.yaw_deg - box.yaw_deg)
-
-    return move(box), moved, [move(b) for b in others]
 
 
 def _scaled(box: RoomBox, scale: float) -> RoomBox:
@@ -186,10 +170,13 @@ def run(
     targets = reduced_targets(classes, depth, fit.camera, refine.max_width)
     refined, history = refine_box(fit.box, targets, refine, seed=seed, render=render, log=log)
 
-    box, posed, (coarse_box,) = canonical(refined, fit.camera, [fit.box])
-    box, coarse_box, posed = _scaled(box, scale), _scaled(coarse_box, scale), _scaled_camera(posed, scale)
+    # Each estimate is a box and the camera posed in its world: the coarse one in the floor's
+    # world, the refined one in its own (upright, centred); both in the depth's units.
+    upright, upright_camera = refined.upright(fit.camera)
+    coarse_box, coarse_camera = _scaled(fit.box, scale), _scaled_camera(fit.camera, scale)
+    box, posed = _scaled(upright, scale), _scaled_camera(upright_camera, scale)
     metrics = {
-        "coarse": image_metrics(coarse_box, posed, classes, photo.depth, scale),
+        "coarse": image_metrics(coarse_box, coarse_camera, classes, photo.depth, scale),
         "refined": image_metrics(box, posed, classes, photo.depth, scale),
     }
     truth_dir = Path(truth_dir) if truth_dir is not None else capture_dir / "truth"
@@ -197,9 +184,10 @@ def run(
     if truth is not None:
         to_truth = truth_scale(classes, photo.depth, *truth)
         metrics["truth_scale"] = round(to_truth, 6)
-        metrics["coarse"].update(truth_metrics(coarse_box, posed, *truth, scale=to_truth))
+        metrics["coarse"].update(truth_metrics(coarse_box, coarse_camera, *truth, scale=to_truth))
         metrics["refined"].update(truth_metrics(box, posed, *truth, scale=to_truth))
     normal = posed.R[:, 1]  # the world's +Y in the camera frame
+    tilt = np.degrees(np.arccos(np.clip(normal @ coarse_camera.R[:, 1], -1.0, 1.0)))
     report = {
         "box": box.to_json(),
         "camera": camera_json(posed, photo.fov_y_deg) | {"fov_source": fov_source},
@@ -207,10 +195,12 @@ def run(
             "world": "y = 0",
             "normal_camera": [round(float(v), 6) for v in normal],
             "offset_camera": round(float(-normal @ posed.t), 6),  # n . p + offset = 0: the camera's height
+            "tilt_from_ransac_deg": round(float(tilt), 4),  # how far the refinement turned the floor
             "ransac": fit.floor,
         },
         "coarse": {
             "box": coarse_box.to_json(),
+            "camera": camera_json(coarse_camera, photo.fov_y_deg),
             "ceiling_seen": fit.ceiling_seen,
             "wall_lines": fit.wall_lines,
         },
@@ -223,7 +213,7 @@ def run(
         "settings": {"coarse": asdict(coarse), "refine": asdict(refine), "seed": seed},
     }
     report["seconds"] = round(time.perf_counter() - started, 2)
-    figure = room_figure(photo.image, classes, posed, coarse_box, box)
+    figure = room_figure(photo.image, classes, (coarse_box, coarse_camera), (box, posed))
     with atomic_dir(out_dir, kind=KIND) as tmp:
         (Path(tmp) / "room.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n")
         cv2.imwrite(str(Path(tmp) / "room_box.png"), figure)
@@ -281,10 +271,11 @@ def _label_image(classes: np.ndarray) -> np.ndarray:
     return out
 
 
-def room_figure(image, classes, camera: Camera, coarse_box: RoomBox, box: RoomBox) -> np.ndarray:
+def room_figure(image, classes, coarse: tuple[RoomBox, Camera], refined: tuple[RoomBox, Camera]) -> np.ndarray:
     """2 x 2 panels, each about 640 pixels wide: the photo with the coarse (orange) and refined
     (green) box; the photo's labels; the coarse and refined boxes' labels, red where they differ
-    from the photo's (black: pixels that do not show the room, in the photo's labels)."""
+    from the photo's (black: pixels that do not show the room, in the photo's labels). Each box
+    comes with the camera posed in its world."""
     from .box import cast_box
 
     scale = 640 / max(image.shape[1], 1)
@@ -296,11 +287,11 @@ def room_figure(image, classes, camera: Camera, coarse_box: RoomBox, box: RoomBo
         return cv2.resize(a, size, interpolation=cv2.INTER_NEAREST if nearest or scale > 1 else cv2.INTER_AREA)
 
     photo = resize(to_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy(), nearest=False)
-    _draw_box(photo, coarse_box, camera, (0, 140, 255), scale)
-    _draw_box(photo, box, camera, (60, 220, 60), scale)
+    _draw_box(photo, *coarse, (0, 140, 255), scale)
+    _draw_box(photo, *refined, (60, 220, 60), scale)
     panels = [photo, resize(_label_image(classes))]
-    for b in (coarse_box, box):
-        labels = np.where(classes >= 0, cast_box(b, camera)[0], -1)
+    for box, camera in (coarse, refined):
+        labels = np.where(classes >= 0, cast_box(box, camera)[0], -1)
         panel = _label_image(labels)
         panel[labels != classes] = (0, 0, 255)
         panels.append(resize(panel))
