@@ -79,9 +79,10 @@ def estimate_like(capture, out, seed=0):
     return out
 
 
-def study(captures: dict, work, **settings) -> list[str]:
-    """docs/room.md's table: the stage on each capture, exact and estimate-like depth; one
-    Markdown row each (corner errors in meters, all and in view; mask IoU; seconds)."""
+def study(captures: dict, work, **settings) -> list[tuple[str, tuple]]:
+    """docs/room.md's table: the stage on each capture, exact and estimate-like depth; per run a
+    Markdown row (corner errors in meters, all and in view; mask IoU; seconds) and
+    ((name, depth), room.json's metrics)."""
     import time
 
     from invrender.room_box import stage
@@ -101,7 +102,7 @@ def study(captures: dict, work, **settings) -> list[str]:
                 cells.append("-" if a is None else f"{a:.3f} -> {b:.3f}")
             cells.append(f"{m['coarse']['depth_error_relative']:.4f} -> {m['refined']['depth_error_relative']:.4f}")
             cells.append(f"{seconds:.0f}")
-            rows.append("| " + " | ".join(cells) + " |")
+            rows.append(("| " + " | ".join(cells) + " |", ((name, depth), m)))
     return rows
 
 

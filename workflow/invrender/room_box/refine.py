@@ -50,6 +50,7 @@ class RefineSettings:
     max_width: int = 128  # the targets' width after block averaging, at most
     depth_weight: float = 1.0  # Eq. 2 weighs the two terms equally
     camera_margin: float = 0.05  # each side stays this far beyond the camera (normalised depth units)
+    rotation_rate: float = 1.0  # the rotation's learning rate as a fraction of the sides'
 
 
 @dataclass
@@ -152,15 +153,15 @@ def _pose(theta: torch.Tensor) -> torch.Tensor:
     return torch.cat([_rodrigues(r) @ ((low + high) / 2), r, torch.log(high - low)]).reshape(1, 9)
 
 
-def _keep_camera_inside(theta: torch.Tensor, camera_center: np.ndarray, margin: float) -> None:
+def _keep_camera_inside(rotation: torch.Tensor, sides: torch.Tensor, camera_center: np.ndarray, margin: float):
     """Project the sides back to at least ``margin`` beyond the camera: the room is seen from
     inside, and a side that crosses the camera (a wall beside or behind it, which the photo shows
     little of or not at all) would turn the box inside out in one step: the renderer would then
     see the box's outside, a wall over the whole photo."""
     with torch.no_grad():
-        inside = rotation_matrix(theta[:3].numpy()).T @ np.asarray(camera_center, np.float64)
-        theta[3:6] = torch.minimum(theta[3:6], torch.as_tensor(inside - margin))
-        theta[6:9] = torch.maximum(theta[6:9], torch.as_tensor(inside + margin))
+        inside = rotation_matrix(rotation.numpy()).T @ np.asarray(camera_center, np.float64)
+        sides[:3] = torch.minimum(sides[:3], torch.as_tensor(inside - margin))
+        sides[3:] = torch.maximum(sides[3:], torch.as_tensor(inside + margin))
 
 
 def refine_box(
@@ -179,8 +180,15 @@ def refine_box(
 
     vertices, faces, labels = box_mesh()
     parts = [MeshPart(vertices, faces, labels)]
-    theta = theta_of(box).requires_grad_(True)
-    optimizer = torch.optim.Adam([theta], lr=settings.learning_rate)
+    start = theta_of(box)
+    rotation, sides = start[:3].clone().requires_grad_(True), start[3:].clone().requires_grad_(True)
+    # Adam's step is about the learning rate in each number, and a turn of the box moves its far
+    # corners by the turn times their distance (a few median depths): the rotation has a rate of
+    # its own (docs/room.md: 0.3 is steadier from a right start, 1 corrects a tilted floor faster).
+    optimizer = torch.optim.Adam(
+        [{"params": [sides]}, {"params": [rotation], "lr": settings.learning_rate * settings.rotation_rate}],
+        lr=settings.learning_rate,
+    )
     schedule = torch.optim.lr_scheduler.LambdaLR(
         optimizer, lambda step: 1.0 - 0.9 * step / max(settings.iterations - 1, 1)
     )
@@ -188,6 +196,7 @@ def refine_box(
     started = time.perf_counter()
     for step in range(settings.iterations):
         optimizer.zero_grad()
+        theta = torch.cat([rotation, sides])
         masks, depth = render(
             parts, _pose(theta), targets.camera, labels=len(BOX_CLASSES), spp=settings.spp, seed=seed + step
         )
@@ -195,7 +204,7 @@ def refine_box(
         loss.backward()
         optimizer.step()
         schedule.step()
-        _keep_camera_inside(theta, targets.camera.center, settings.camera_margin)
+        _keep_camera_inside(rotation, sides, targets.camera.center, settings.camera_margin)
         value = float(loss.detach())
         history.append({"step": step, "loss": value, **parts_of})
         if step % 10 == 0 or step == settings.iterations - 1:
@@ -207,4 +216,4 @@ def refine_box(
                 parts_of["depth_l1"],
                 time.perf_counter() - started,
             )
-    return box_of(theta), history
+    return box_of(torch.cat([rotation, sides])), history
