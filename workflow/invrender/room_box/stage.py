@@ -29,9 +29,9 @@ import numpy as np
 
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.cameras import read_cameras
+from ..scene.images import linear_to_srgb
 from ..scene.room_photo import fov_x_to_y, load_room_photo
 from ..scene.types import Camera, SceneError, require_positive
-from ..segment.opencv import to_srgb8
 from .box import BOX_CLASSES, RoomBox, box_corners
 from .coarse import CoarseSettings, fit_coarse_box
 from .metrics import image_metrics, truth_metrics, truth_scale
@@ -264,6 +264,13 @@ def _draw_box(image: np.ndarray, box: RoomBox, camera: Camera, colour, scale: fl
             cv2.line(image, e0, e1, colour, 2, cv2.LINE_AA)
 
 
+def _srgb8(rgb: np.ndarray) -> np.ndarray:
+    """Linear RGB -> 8-bit sRGB with the 99th percentile white, as the capture's PNG preview
+    (scene.images.write_png_preview; a stage may not import segment/'s copy)."""
+    level = float(np.percentile(rgb.max(axis=2), 99)) if rgb.size else 0.0
+    return np.round(linear_to_srgb(rgb / (level if level > 0 else 1.0)) * 255).astype(np.uint8)
+
+
 def _label_image(classes: np.ndarray) -> np.ndarray:
     out = np.zeros((*classes.shape, 3), np.uint8)
     for i in range(len(BOX_CLASSES)):
@@ -286,7 +293,7 @@ def room_figure(image, classes, coarse: tuple[RoomBox, Camera], refined: tuple[R
         size = (round(a.shape[1] * scale), round(a.shape[0] * scale))
         return cv2.resize(a, size, interpolation=cv2.INTER_NEAREST if nearest or scale > 1 else cv2.INTER_AREA)
 
-    photo = resize(to_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy(), nearest=False)
+    photo = resize(_srgb8(np.asarray(image)[:, :, :3])[:, :, ::-1].copy(), nearest=False)
     _draw_box(photo, *coarse, (0, 140, 255), scale)
     _draw_box(photo, *refined, (60, 220, 60), scale)
     panels = [photo, resize(_label_image(classes))]
