@@ -23,6 +23,8 @@ RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake",
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
 RULES |= {"evaluate_duplicates", "edit", "accuracy", "summary"}
 CHECKPOINT_RULES = {"duplicates_crop"}
+# Rules of issue 16's room mode, defined (linted, formatted) but not yet asked for by `all`.
+UNTARGETED_RULES = {"room_box"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
 RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "accuracy"}
 
@@ -68,7 +70,7 @@ def test_every_rule_is_known():
     defined = set()
     for smk in [REPO / "Snakefile", *(REPO / "workflow" / "rules").glob("*.smk")]:
         defined |= set(re.findall(r"(?m)^(?:rule|checkpoint) (\w+):", smk.read_text()))
-    assert defined == {"all"} | RULES | CHECKPOINT_RULES and not RULES & CHECKPOINT_RULES
+    assert defined == {"all"} | RULES | CHECKPOINT_RULES | UNTARGETED_RULES and not RULES & CHECKPOINT_RULES
 
 
 def test_rulegraph_picture_is_current(tmp_path):

@@ -136,6 +136,25 @@ def cmd_segment(args):
     )
 
 
+def cmd_room_box(args):
+    from .room_box import stage
+    from .room_box.coarse import CoarseSettings
+    from .room_box.refine import RefineSettings
+
+    stage.run(
+        args.capture,
+        args.out,
+        truth_dir=args.truth,
+        fov_y_deg=args.fov_y,
+        fov_x_deg=args.fov_x,
+        focal_length=args.focal_length,
+        files={name: getattr(args, name) for name in ("photo", "depth", "ids", "labels") if getattr(args, name)},
+        coarse=CoarseSettings.from_overrides(_key_values(args.coarse)),
+        refine=RefineSettings(iterations=args.iterations, spp=args.spp, max_width=args.max_width),
+        seed=args.seed,
+    )
+
+
 def cmd_gradients(args):
     from .gradients import stage
 
@@ -469,6 +488,33 @@ def build_parser() -> argparse.ArgumentParser:
         "--set", action="append", metavar="KEY=VALUE", help="opencv setting (OpenCVSettings in segment/opencv.py)"
     )
     p.set_defaults(func=cmd_segment)
+
+    p = stages.add_parser("room-box", help="the room box of one photo (depth, segmentation, fov) -> room.json, figure")
+    p.add_argument("capture", help="room capture directory (photo, depth.exr, panoptic.png/json, camera.json)")
+    p.add_argument("--out", required=True, help="directory to write (room.json, room_box.png)")
+    p.add_argument("--truth", help="truth directory (room.json, cameras/; default: the capture's truth/ if any)")
+    lens = p.add_mutually_exclusive_group()
+    lens.add_argument("--fov-y", type=float, help="vertical field of view in degrees (wins over camera.json)")
+    lens.add_argument("--fov-x", type=float, help="horizontal field of view in degrees")
+    lens.add_argument("--focal-length", type=float, help="focal length in pixels (square pixels, centred)")
+    for name, what in (
+        ("photo", "photograph"),
+        ("depth", "depth EXR"),
+        ("ids", "segment id PNG"),
+        ("labels", "label table"),
+    ):
+        p.add_argument(f"--{name}", help=f"the {what}, relative to the capture (default: its standard name)")
+    p.add_argument("--iterations", type=int, default=60, help="Adam steps of the refinement (Eq. 2)")
+    p.add_argument("--spp", type=int, default=4, help="samples per pixel of each refinement render")
+    p.add_argument("--max-width", type=int, default=128, help="width of the refinement's targets, at most")
+    p.add_argument("--seed", type=int, default=0, help="RANSAC and render seed")
+    p.add_argument(
+        "--coarse",
+        action="append",
+        metavar="KEY=VALUE",
+        help="coarse fit setting (CoarseSettings in room_box/coarse.py)",
+    )
+    p.set_defaults(func=cmd_room_box)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")

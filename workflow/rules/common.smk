@@ -971,3 +971,47 @@ def gpu_request(wildcards):
     if not device or any(word in device for word in CPU_DEVICE_WORDS):
         return 0
     return 1
+
+
+# ---------------------------------------------------------------------------- room
+# (the input functions of workflow/rules/room_box.smk)
+
+
+def room_box_capture_files(wildcards):
+    """The capture's files the stage reads where the config names them (relative to the
+    capture), as --photo/--depth/--ids/--labels values."""
+    if is_synthetic(wildcards.scene):
+        return {}
+    capture = SCENES[wildcards.scene]["capture"]
+    files = {"photo": capture.get("image"), "depth": capture.get("depth")}
+    files |= {
+        key: capture.get("segmentation", {}).get(key) for key in ("ids", "labels")
+    }
+    return {key: value for key, value in files.items() if value is not None}
+
+
+def room_box_input(wildcards):
+    """A synthetic capture is one directory output; a user's capture the directory and the
+    files the config names, so that editing one re-runs the stage."""
+    files = [capture_dir(wildcards)]
+    if not is_synthetic(wildcards.scene):
+        files += [
+            os.path.join(capture_dir(wildcards), value)
+            for value in room_box_capture_files(wildcards).values()
+        ]
+    return files
+
+
+def room_box_options(wildcards):
+    """Flags: the named files and the lens (`capture.field_of_view` is horizontal)."""
+    options = [
+        f"--{key} {shlex.quote(value)}"
+        for key, value in room_box_capture_files(wildcards).items()
+    ]
+    if not is_synthetic(wildcards.scene):
+        capture = SCENES[wildcards.scene]["capture"]
+        if "field_of_view" in capture:
+            options.append(f"--fov-x {capture['field_of_view']}")
+        elif "focal_length" in capture:
+            options.append(f"--focal-length {capture['focal_length']}")
+    return " ".join(options)
