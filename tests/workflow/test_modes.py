@@ -87,8 +87,11 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
         "bare": {"mode": "room", "capture": {"path": "bare"}},
     }
     result = dry_run(tmp_path, scenes, "-p")
-    # shelf and boxes: the whole chain; living: its camera (the room stages wait for issue 16)
-    assert job_counts(result.stdout) == {**dict.fromkeys(DUPLICATES_CHAIN, 2), "cameras": 3, "all": 1}
+    # shelf and boxes: the whole chain; living: its camera and its room box; bare (no depth, no
+    # segmentation): nothing, with a warning saying what to provide
+    assert job_counts(result.stdout) == {**dict.fromkeys(DUPLICATES_CHAIN, 2), "cameras": 3, "room_box": 1, "all": 1}
+    assert "room-box living --out results/living/room_box" in result.stdout
+    assert "the room capture 'bare' lacks a depth map" in result.stdout
     assert "cameras shelf/images/IMG_0001.jpg --out results/shelf/cameras --field-of-view 60" in result.stdout
     assert "cameras boxes/images/a.exr --out results/boxes/cameras --focal-length 900" in result.stdout
     assert "segment shelf/images/IMG_0001.jpg --out results/shelf/segmentation --backend opencv" in result.stdout
@@ -96,7 +99,7 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     assert "scene 'shelf' (duplicates, a capture of your own): builds results/shelf/cameras, " in result.stdout
     assert "scene 'tins' (duplicates, a capture of your own): builds nothing yet" in result.stdout
     assert "the evaluation of the recovered material and light (issue 14)" in result.stdout
-    assert "scene 'living' (room, a capture of your own): builds results/living/cameras;" in result.stdout
+    assert "scene 'living' (room, a capture of your own): builds results/living/cameras, " in result.stdout
     assert "(issue 16) build results/living/scene/" in result.stdout
     assert not (tmp_path / "results").exists()
 
@@ -204,10 +207,11 @@ def test_bad_capture_is_refused_naming_scene_key_and_path(tmp_path, name):
 
 
 def test_a_synthetic_room_photo_is_a_room_scene_made_by_synthesize(tmp_path):
-    """Kind room_photo (the fixture tests/workflow/room_photo.yaml) gives mode room: only its
-    capture is built (no cameras rule: its field of view is in camera.json), by synthesize."""
+    """Kind room_photo (the fixture tests/workflow/room_photo.yaml) gives mode room: its capture
+    is built by synthesize (no cameras rule: its field of view is in camera.json), then its box."""
     result = snakemake(tmp_path, "-n", "-p", config=TEST_CONFIG.with_name("room_photo.yaml"))
-    assert job_counts(result.stdout) == {"synthesize": 1, "all": 1}
+    assert job_counts(result.stdout) == {"synthesize": 1, "room_box": 1, "all": 1}
+    assert "room-box results/living/capture --out results/living/room_box" in result.stdout
     assert "synthesize room_photo --out results/living/capture" in result.stdout
     refused = dry_run(tmp_path, {"living": {"mode": "multiview", "synthetic": {"kind": "room_photo"}}}, check=False)
     assert "'multiview' disagrees with synthetic.kind 'room_photo', whose capture is room" in refused.stdout

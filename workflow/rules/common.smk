@@ -465,6 +465,33 @@ ROOM_DEPTH = "depth.exr"
 ROOM_SEGMENTATION = ("panoptic.png", "panoptic.json")
 
 
+def _room_missing(capture):
+    """What a room capture lacks of what the room stages need, as text for people."""
+    path = Path(capture["path"])
+    missing = []
+    if "depth" not in capture and not (path / ROOM_DEPTH).is_file():
+        missing.append(
+            f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
+        )
+    if "segmentation" not in capture and not all(
+        (path / f).is_file() for f in ROOM_SEGMENTATION
+    ):
+        missing.append(
+            "a panoptic segmentation (capture.segmentation {ids, labels}, or "
+            f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"
+        )
+    return missing
+
+
+def has_room_inputs(scene):
+    """A room scene with what room_box needs: a synthetic room photo, or a capture with depth
+    and segmentation (without them `all` leaves the stage out; asked for, it says what to
+    provide)."""
+    if mode(scene) != "room":
+        return False
+    return is_synthetic(scene) or not _room_missing(SCENES[scene]["capture"])
+
+
 def _check_room(name, capture):
     """The photograph (photo.exr/png/jpg, or images/ with one, or `image`); depth and a panoptic
     segmentation named or in the capture's layout. What is missing is said now: the room stages
@@ -480,18 +507,7 @@ def _check_room(name, capture):
     if "segmentation" in capture:
         _named_file(name, "segmentation.ids", (".png",))
         _named_file(name, "segmentation.labels", (".json", ".csv"))
-    missing = []
-    if "depth" not in capture and not (path / ROOM_DEPTH).is_file():
-        missing.append(
-            f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
-        )
-    if "segmentation" not in capture and not all(
-        (path / f).is_file() for f in ROOM_SEGMENTATION
-    ):
-        missing.append(
-            "a panoptic segmentation (capture.segmentation {ids, labels}, or "
-            f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"
-        )
+    missing = _room_missing(capture)
     if missing:
         logger.warning(
             f"config: scene {name!r}: the room capture {str(path)!r} lacks "
@@ -612,6 +628,8 @@ def scene_targets(scene):
             f"{results}/gradients",
             f"{results}/milo/weights.pt",
         ]
+    if has_room_inputs(scene):
+        targets.append(f"{results}/room_box")
     if mode(scene) == "duplicates" and has_cameras(scene):
         targets += [
             f"{results}/segmentation",

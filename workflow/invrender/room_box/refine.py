@@ -20,7 +20,8 @@ axes (the box is {R(r) q : low <= q <= high}), 9 numbers; the renderer's 9-vecto
 that a distorted depth tilted is corrected by the masks. Sides rather than centre and size: a
 side the photo does not show (the wall behind the camera) gets no gradient and stays where the
 coarse fit put it, instead of drifting with the centre.
-Adam with a learning rate decaying linearly to a tenth; each step renders with a new seed; after
+Adam with a learning rate decaying linearly to a tenth, keeping the iterate of the lowest loss
+(the coarse box included); each step renders with a new seed; after
 each step the sides are projected to keep the camera inside the box.
 """
 
@@ -172,7 +173,7 @@ def refine_box(
     render=None,
     log: logging.Logger = logger,
 ) -> tuple[OrientedBox, list[dict]]:
-    """Adam on Eq. 2 from ``box``; returns the refined box and the loss at each step. ``render``
+    """Adam on Eq. 2 from ``box``; returns the box of the lowest loss seen and the loss at each step. ``render``
     is render_masks_depth's signature (the default; tests may pass the same function)."""
     if render is None:
         from ..render.silhouette import render_masks_depth as render
@@ -192,7 +193,9 @@ def refine_box(
     schedule = torch.optim.lr_scheduler.LambdaLR(
         optimizer, lambda step: 1.0 - 0.9 * step / max(settings.iterations - 1, 1)
     )
+    _keep_camera_inside(rotation, sides, targets.camera.center, settings.camera_margin)  # the start too
     history = []
+    best = (float("inf"), start)
     started = time.perf_counter()
     for step in range(settings.iterations):
         optimizer.zero_grad()
@@ -201,6 +204,8 @@ def refine_box(
             parts, _pose(theta), targets.camera, labels=len(BOX_CLASSES), spp=settings.spp, seed=seed + step
         )
         loss, parts_of = box_loss(masks, depth, targets, settings.depth_weight)
+        if float(loss.detach()) < best[0]:
+            best = (float(loss.detach()), theta.detach().clone())
         loss.backward()
         optimizer.step()
         schedule.step()
@@ -216,4 +221,8 @@ def refine_box(
                 parts_of["depth_l1"],
                 time.perf_counter() - started,
             )
-    return box_of(torch.cat([rotation, sides])), history
+    # The lowest loss seen, the coarse box (step 0) included: near the optimum Adam's noisy steps
+    # wander (the demo's living room: IoU 0.9999 coarse, 0.9993 after 60 steps), and the sides the
+    # photo does not show drift with the rotation, so the last iterate is not the best one.
+    # (The losses are Monte Carlo estimates; this keeps an iterate at least as good within their noise.)
+    return box_of(best[1]), history
