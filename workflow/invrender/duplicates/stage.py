@@ -233,7 +233,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     timings = {"match_and_map_s": time.perf_counter() - started}
     subpixel = {}
     if settings.subpixel_rounds and registration.reconstruction is not None:
-        subpixel = _subpixel_rounds(photo, ids, K, registration, settings)
+        subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
     if len(registration.poses) < 2:
         raise SceneError(
@@ -266,15 +266,20 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     }
 
 
-def _subpixel_rounds(photo, ids, K, registration: mapping.Registration, settings: Settings) -> dict:
-    """COLMAP's model with copies that took the planar flip turned back, every track aligned to
-    sub-pixel and all copies adjusted together (adjust.py), in place: the registration's poses
-    and points become the adjusted ones. Returns what it did, for duplicates.json."""
+def _subpixel_rounds(photo, ids, K, registration: mapping.Registration, workdir, settings: Settings) -> dict:
+    """COLMAP's model with copies that took the planar flip turned back, every verified match
+    triangulated, every track aligned to sub-pixel and all copies adjusted together (adjust.py):
+    the registration's model, poses and points become the adjusted ones. Returns what it did,
+    for duplicates.json."""
     gray = adjust.gray_image(photo)
     reconstruction = registration.reconstruction
     names = {mapping.image_name(i): i for i in list(registration.poses) + registration.unregistered}
     adjust.bundle_adjust(reconstruction, 2 * settings.max_error_px)
     flipped = adjust.resolve_flips(reconstruction, ids, K, names)
+    adjust.bundle_adjust(reconstruction, settings.max_error_px)
+    reconstruction = mapping.retriangulate(reconstruction, workdir, settings.seed)
+    registration.reconstruction = reconstruction
+    adjust.bundle_adjust(reconstruction, 2 * settings.max_error_px)
     rounds = []
     for k in range(settings.subpixel_rounds):
         stats = adjust.align_tracks(reconstruction, gray, K)
@@ -339,7 +344,8 @@ def run(
         found = solve(photo, ids, K, crops, features, tmp / "colmap", settings, progress)
         report = _write(tmp, found, camera, K, photo, ids, listed, settings)
         # keep COLMAP's database (its matches open in COLMAP's GUI); its models are sparse/ now
-        shutil.rmtree(tmp / "colmap" / "models", ignore_errors=True)
+        for models in ("models", "retriangulated"):
+            shutil.rmtree(tmp / "colmap" / models, ignore_errors=True)
     log.info("duplicates: %d of %d instances placed -> %s", len(found["poses"]), len(listed), out_dir)
     return report
 
