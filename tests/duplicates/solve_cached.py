@@ -32,7 +32,9 @@ def main(cameras, segmentation, crops, out, search, dense, *values):
         cached = pickle.loads(Path(search).read_bytes())
         pairs, report = cached["pairs"], cached["report"]
     else:
-        report = [{k: r[k] for k in ("pair", "angle_deg", "matches")} for r in json.loads(Path(search).read_text())["pairs"]]
+        report = [
+            {k: r[k] for k in ("pair", "angle_deg", "matches")} for r in json.loads(Path(search).read_text())["pairs"]
+        ]
         pairs = {tuple(r["pair"]): (np.zeros((0, 2)), np.zeros((0, 2))) for r in report}
     stage.match_all = lambda *args, **kwargs: (pairs, [dict(r) for r in report])
     stage.matching.CropFeatures.load = staticmethod(lambda path: None)  # the search is cached

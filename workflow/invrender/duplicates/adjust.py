@@ -231,7 +231,9 @@ def resolve_flips(reconstruction, ids: np.ndarray, K: np.ndarray, instance_of_na
     flipped = []
     for image_id in list(reconstruction.reg_image_ids()):
         image = reconstruction.image(image_id)
-        observed = [(np.asarray(p.xy), reconstruction.point3D(p.point3D_id).xyz) for p in image.points2D if p.has_point3D()]
+        observed = [
+            (np.asarray(p.xy), reconstruction.point3D(p.point3D_id).xyz) for p in image.points2D if p.has_point3D()
+        ]
         if len(observed) < 6:
             continue
         xy, X = (np.array(v, np.float64) for v in zip(*observed))
