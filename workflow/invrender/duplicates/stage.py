@@ -231,10 +231,6 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         workdir, K, width, height, sorted(crops), pairs, seed=settings.seed, max_error_px=settings.max_error_px
     )
     timings = {"match_and_map_s": time.perf_counter() - started}
-    subpixel = {}
-    if settings.subpixel_rounds and registration.reconstruction is not None:
-        subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
-        timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
     if len(registration.poses) < 2:
         raise SceneError(
             "duplicates",
@@ -243,6 +239,10 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
             f"{len(registration.poses)} (unregistered: {registration.unregistered}; "
             f"{len(registration.verified_pairs)} pairs passed geometric verification)",
         )
+    subpixel = {}
+    if settings.subpixel_rounds and registration.reconstruction is not None:
+        subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
+        timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
     mesh = _carve(ids, registration.poses, K, registration.points, settings)
     # COLMAP's origin can lie anywhere, even behind the camera: the object frame starts at the
     # hull's centroid, so every pose's translation is the object's centre in the camera
