@@ -143,7 +143,7 @@ def test_scenes_and_variants():
     quick = bench.settings_from(True, None, None, None)
     assert quick.scenes == ["box-6-ci", "can-6-ci"] and all(v == ["default"] for v in quick.variants.values())
     full = bench.settings_from(False, None, None, "work")
-    assert full.variants["box-10-hd"] == ["default", "no-rotation-search", "sift"]
+    assert full.variants["box-10-hd"] == ["default", "no-rotation-search", "sift", "tracks-subpixel"]
     assert full.variants["can-20-hd"] == ["default"]
     chosen = bench.settings_from(False, "box-20-hd,can-6-ci", "sift", None)
     assert chosen.variants == {"box-20-hd": ["sift"], "can-6-ci": ["sift"]}

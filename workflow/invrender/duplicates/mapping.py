@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-__all__ = ["Registration", "register", "image_name"]
+__all__ = ["Registration", "register", "retriangulate", "image_name"]
 
 log = logging.getLogger(__name__)
 
@@ -226,6 +226,19 @@ def register(
     unregistered = [i for i in instance_ids if i not in poses]
     log.info("COLMAP registered %d of %d instances (%d points)", len(poses), len(instance_ids), len(points))
     return Registration(poses, unregistered, points.reshape(-1, 3), best, verified)
+
+
+def retriangulate(reconstruction, workdir, seed: int = 0) -> pycolmap.Reconstruction:
+    """The model with every verified match of workdir/database.db triangulated at its poses (the
+    points kept, tracks extended): the incremental mapper leaves many out (box-20-hd: 2,783 points
+    with 15,000 observations, 3,129 with 28,000 after this)."""
+    workdir = Path(workdir)
+    out = workdir / "retriangulated"
+    out.mkdir(parents=True, exist_ok=True)
+    return pycolmap.triangulate_points(
+        reconstruction, str(workdir / "database.db"), str(workdir), str(out), clear_points=False,
+        options=_mapper_options(seed, 3),
+    )  # fmt: skip
 
 
 def write_model(registration: Registration, out_dir, centre: np.ndarray, scale: float) -> None:
