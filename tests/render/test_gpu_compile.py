@@ -116,7 +116,9 @@ def back_end(name: str) -> bool:
 def test_the_back_end_sees_every_kernel_file_in_all_on_and_all_off():
     for target in TARGETS:
         deep = {(entry, name.split(", ")[-1]) for name, entry, *_ in builds(target) if back_end(name)}
-        assert {(entry, which) for entry in ("render.cl", "probe.cl", "adjoint.cl") for which in ("all on", "all off")} <= deep
+        assert {
+            (entry, which) for entry in ("render.cl", "probe.cl", "adjoint.cl") for which in ("all on", "all off")
+        } <= deep
         assert sum(not back_end(name) for name, *_ in builds(target)) == 4 * len(FLAGS)
 
 
