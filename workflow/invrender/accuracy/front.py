@@ -95,9 +95,12 @@ def snippet(row: dict, default_features: dict | None = None) -> dict:
             "gradients": {"spp": row["spp"]},
             "milo": {"overrides": {"spp": row["spp"], "max_bounces": row["max_bounces"]}},
         }
-    overrides = {"iterations": row["iteration"]}
-    overrides.update(row.get("overrides") or {})
-    return {"milo": {"overrides": overrides}}
+    # recovery: the run's stage (its sweep), its preset where the run changed it, its overrides
+    # with the knee's iteration as the training length
+    section = {"overrides": {**(row.get("overrides") or {}), "iterations": row["iteration"]}}
+    if row.get("snippet_preset"):
+        section = {"preset": row["snippet_preset"], **section}
+    return {row.get("sweep") or "milo": section}
 
 
 def snippet_text(snippet_dict: dict) -> str:
