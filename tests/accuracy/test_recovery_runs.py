@@ -112,7 +112,7 @@ def test_a_knee_that_misses_its_stated_error_on_another_seed_is_reported(sweep, 
             "floors": [],
         }
     )
-    assert f"trained again with seed {5 + stage.CHECK_SEED}" in text and "(NOT met)" in text
+    assert f"by training it again with seed {5 + stage.CHECK_SEED}" in text and "(NOT met)" in text
 
 
 def test_without_a_sweep_run_the_knee_is_not_checked(sweep, tmp_path):

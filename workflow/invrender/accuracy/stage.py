@@ -336,7 +336,7 @@ def markdown(document: dict) -> str:
             "",
         ]
         if check.get("checked"):
-            how = f"trained again with seed {check['seed']}" if "seed" in check else "on another seed"
+            how = f"by training it again with seed {check['seed']}" if "seed" in check else "on another seed"
             lines += [f"Checked {how}: {check['error']:.4g} ({'met' if check['met'] else 'NOT met'}).", ""]
         elif check:
             lines += [f"Not checked on another seed: {check['why']}.", ""]
