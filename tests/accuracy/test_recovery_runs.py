@@ -123,7 +123,9 @@ def test_without_a_sweep_run_the_knee_is_not_checked(sweep, tmp_path):
 
 def test_a_duplicates_run_is_scored_by_its_albedo(tmp_path):
     (tmp_path / "training.json").write_text(
-        json.dumps({"preset": "ci", "settings": {"rays": 2048, "iterations": 20}, "iterations": 20, "training_seconds": 7.5})
+        json.dumps(
+            {"preset": "ci", "settings": {"rays": 2048, "iterations": 20}, "iterations": 20, "training_seconds": 7.5}
+        )
     )
     (tmp_path / "log.csv").write_text("iteration,wall_time,image\n1,0.1,1\n")
     ours = {"albedo_psnr_db": 20.0, "env_mse": 0.01, "relighting_psnr_db": 30.0}

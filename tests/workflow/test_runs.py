@@ -132,14 +132,20 @@ def test_recovery_sweep_trains_each_run_and_the_knee_meets_its_error_on_a_second
         assert all(row["recovery_error"] and not row["error_name"].startswith("training loss") for row in rows)
         document = read_json(complete / f"results/{scene}/accuracy/accuracy.json")
         knee, check = document["knees"]["recovery"], document["checks"]["recovery"]
-        assert check["checked"] and check["seed"] != read_json(
-            complete / f"results/{scene}/accuracy_runs/{sorted(labels)[0]}/train/training.json"
-        )["settings"]["seed"]
+        assert (
+            check["checked"]
+            and check["seed"]
+            != read_json(complete / f"results/{scene}/accuracy_runs/{sorted(labels)[0]}/train/training.json")[
+                "settings"
+            ]["seed"]
+        )
         assert check["iteration"] == knee["row"]["iteration"]
         assert check["stated_error"] == knee["stated_error"] == pytest.approx(knee["error"] * 1.25)
         assert check["error"] <= check["stated_error"], (scene, knee["row"]["label"], check)
         assert check["met"]
-        assert "Checked by training it again with seed" in (complete / f"results/{scene}/accuracy/accuracy.md").read_text()
+        assert (
+            "Checked by training it again with seed" in (complete / f"results/{scene}/accuracy/accuracy.md").read_text()
+        )
 
 
 def test_unknown_device_keeps_the_built_capture(complete):

@@ -347,7 +347,9 @@ def cmd_accuracy_run(args):
     for entry in args.input or []:
         name, sep, path = entry.partition("=")
         if not sep or not path:
-            raise SceneError("accuracy-run --input", "input", f"NAME=PATH (e.g. geometry=results/x/geometry), got {entry!r}")
+            raise SceneError(
+                "accuracy-run --input", "input", f"NAME=PATH (e.g. geometry=results/x/geometry), got {entry!r}"
+            )
         inputs[name] = path
     runs.train_and_score(
         args.out,

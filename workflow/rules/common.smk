@@ -904,7 +904,8 @@ def run_label(source, change):
 def recovery_runs(scene):
     """{label: {"source", "preset", "overrides"}} of the scene's recovery sweep (config
     accuracy.recovery for the budget): the stage's configured preset and overrides, then the
-    budget's base, then the run's own. Only synthetic scenes: a run is scored by the truth."""
+    budget's base, then the run's own. Only synthetic scenes: a run is scored by the truth.
+    """
     source = RECOVERY_SOURCE.get(mode(scene))
     if source is None or not is_synthetic(scene) or not has_cameras(scene):
         return {}
@@ -912,12 +913,16 @@ def recovery_runs(scene):
     where = f"config: accuracy.recovery.{budget}.{source}"
     sweep = config["accuracy"]["recovery"][budget].get(source)
     if not isinstance(sweep, dict) or not isinstance(sweep.get("runs"), list):
-        raise WorkflowError(f"{where}: expected {{base: {{...}}, runs: [{{...}}, ...]}}, got {sweep!r}")
+        raise WorkflowError(
+            f"{where}: expected {{base: {{...}}, runs: [{{...}}, ...]}}, got {sweep!r}"
+        )
     preset, overrides = CONFIGURED[source](scene)
     runs = {}
     for change in sweep["runs"]:
         if not isinstance(change, dict):
-            raise WorkflowError(f"{where}.runs: expected mappings of settings, got {change!r}")
+            raise WorkflowError(
+                f"{where}.runs: expected mappings of settings, got {change!r}"
+            )
         label = run_label(source, change)
         if label in runs:
             raise WorkflowError(f"{where}.runs: {change!r} is there twice")
@@ -931,7 +936,10 @@ def recovery_runs(scene):
 
 
 def recovery_run_dirs(wildcards):
-    return [f"results/{wildcards.scene}/accuracy_runs/{label}" for label in recovery_runs(wildcards.scene)]
+    return [
+        f"results/{wildcards.scene}/accuracy_runs/{label}"
+        for label in recovery_runs(wildcards.scene)
+    ]
 
 
 def recovery_run(wildcards):
@@ -961,7 +969,10 @@ def recovery_run_inputs(wildcards):
 def recovery_run_options(wildcards):
     """accuracy-run's --source, --preset, --set and --input flags."""
     run, scene = recovery_run(wildcards), wildcards.scene
-    inputs = {"geometry": f"results/{scene}/geometry", "cameras": f"results/{scene}/cameras"}
+    inputs = {
+        "geometry": f"results/{scene}/geometry",
+        "cameras": f"results/{scene}/cameras",
+    }
     if run["source"] == "milo":
         inputs |= {
             "images": f"results/{scene}/cameras/images",
@@ -975,8 +986,14 @@ def recovery_run_options(wildcards):
             "truth": f"results/{scene}/capture/ground_truth",
             "images": f"results/{scene}/capture/images",
         }
-    flags = [f"--source {run['source']}", f"--preset {shlex.quote(run['preset'])}", set_options(run["overrides"])]
-    flags += [f"--input {shlex.quote(f'{name}={path}')}" for name, path in inputs.items()]
+    flags = [
+        f"--source {run['source']}",
+        f"--preset {shlex.quote(run['preset'])}",
+        set_options(run["overrides"]),
+    ]
+    flags += [
+        f"--input {shlex.quote(f'{name}={path}')}" for name, path in inputs.items()
+    ]
     return " ".join(flags)
 
 
@@ -990,7 +1007,9 @@ def accuracy_options(wildcards):
         ]
     if mode(scene) == "duplicates":
         options.append(f"--run duplicates_material=results/{scene}/material")
-    if is_synthetic(scene):  # the configured run's scores (evaluate's), and the sweep's runs
+    if is_synthetic(
+        scene
+    ):  # the configured run's scores (evaluate's), and the sweep's runs
         options.append(f"--metrics results/{scene}/report/metrics.json")
     options += [f"--sweep {path}" for path in recovery_run_dirs(wildcards)]
     camera = config["accuracy"]["camera"]

@@ -1,6 +1,7 @@
 """Recovery: what the training runs already recorded, as error against training time.
 
-Nothing is trained here (the sweep's runs are trained by runs.py, each its own job). A training run is a directory holding
+Nothing is trained here (runs.py trains the sweep's runs, each a job of its own). A training
+run is a directory holding
 - ``log.csv``: one row per iteration with at least ``iteration``, ``wall_time`` (seconds since
   the start) and a loss column (MILO's ``image``: the photometric loss on its ray batch);
 - ``training.json`` (optional): ``{"preset": ..., "settings": {...}}``, the knobs of the run;

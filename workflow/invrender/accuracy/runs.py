@@ -132,7 +132,9 @@ def train_and_score(
     with atomic_dir(out_dir, kind=KIND) as tmp:
         tmp = Path(tmp)
         (tmp / "logs").mkdir()
-        seconds["train"] = _invrender(_train_command(source, inputs, tmp, preset, overrides), tmp / "logs/train.log", device)
+        seconds["train"] = _invrender(
+            _train_command(source, inputs, tmp, preset, overrides), tmp / "logs/train.log", device
+        )
         seconds["bake"] = _invrender(_bake_command(source, inputs, tmp), tmp / "logs/bake.log", None)
         seconds["score"] = _invrender(_score_command(source, inputs, tmp, spp, seed), tmp / "logs/score.log", device)
         document = {

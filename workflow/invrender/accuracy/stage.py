@@ -198,7 +198,9 @@ def _check_recovery(runs, knee, device) -> dict:
     run of the same stage (its run.json), the settings from the knee run's training.json."""
     row = knee["row"]
     run = next(r for r in runs if r.get("label", "configured") == row["label"])
-    spec = run.get("spec") or next((r["spec"] for r in runs if r.get("spec") and r["spec"]["source"] == row["sweep"]), None)
+    spec = run.get("spec") or next(
+        (r["spec"] for r in runs if r.get("spec") and r["spec"]["source"] == row["sweep"]), None
+    )
     if spec is None:
         return {"checked": False, "why": f"no sweep run of {row['sweep']} says how to train it (run.json)"}
     trained = recovery.run_settings(run["dir"])

@@ -88,7 +88,9 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, w
     work = Path(work).absolute()
     work.mkdir(parents=True, exist_ok=True)
     log.info("bench accuracy: the %s budget through the workflow in %s", budget, work)
-    done = subprocess.run(snakemake_command(work, budget, device), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    done = subprocess.run(
+        snakemake_command(work, budget, device), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     (work / "bench_accuracy.log").write_text(done.stdout)
     if done.returncode != 0:
         tail = "\n".join(done.stdout.splitlines()[-30:])
