@@ -76,6 +76,8 @@ def test_the_knee_is_the_cheap_run_and_its_snippet_selects_it(sweep):
     row = knee["row"]
     assert (row["label"], row["iteration"]) == ("milo-rays2048", 20)  # 0.035 <= 2 x 0.02, in 20 s
     assert front.snippet(row) == {"milo": {"overrides": {"rays": 2048, "iterations": 20}}}
+    # the scene's held-out views are its own setting, not pasted into milo's
+    assert front.snippet(row | {"overrides": {"holdout": ["v.exr"]}}) == {"milo": {"overrides": {"iterations": 20}}}
 
 
 def test_knee_trained_again_on_another_seed_meets_its_stated_error(sweep, monkeypatch):

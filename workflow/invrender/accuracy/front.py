@@ -25,6 +25,9 @@ GRADIENT_FLOOR_RATIO = 1.5  # ... a gradient curve where its error is this times
 # lamps seen in the glossy table) decide one image's squared error, far from its expectation,
 # and a pixel's variance cannot be estimated from one sample.
 FIT_MIN_SPP = 4
+# A run's settings that belong to the scene, not to the stage's config: never pasted into it
+# (MILO's held-out views are the scene's `holdout`).
+SCENE_SETTINGS = ("holdout",)
 ERROR_KEY = {"forward": "rmse", "gradients": "grad_rel_error", "recovery": "recovery_error"}
 
 
@@ -97,7 +100,8 @@ def snippet(row: dict, default_features: dict | None = None) -> dict:
         }
     # recovery: the run's stage (its sweep), its preset where the run changed it, its overrides
     # with the knee's iteration as the training length
-    section = {"overrides": {**(row.get("overrides") or {}), "iterations": row["iteration"]}}
+    overrides = {k: v for k, v in (row.get("overrides") or {}).items() if k not in SCENE_SETTINGS}
+    section = {"overrides": {**overrides, "iterations": row["iteration"]}}
     if row.get("snippet_preset"):
         section = {"preset": row["snippet_preset"], **section}
     return {row.get("sweep") or "milo": section}
