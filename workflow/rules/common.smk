@@ -883,16 +883,16 @@ def accuracy_inputs(wildcards):
     return inputs
 
 
-# The recovery sweep (rule recovery_run): each configuration of the scene's recovery stage a
+# The recovery sweep (the recovery_run rule), each configuration of the scene's recovery stage a
 # job of its own, named by what it changes, e.g. milo-rays8192, milo-layers2-width32.
 RECOVERY_SOURCE = {"multiview": "milo", "duplicates": "duplicates_material"}
-CONFIGURED = {
-    "milo": lambda scene: (config["milo"]["preset"], milo_overrides(scene)),
-    "duplicates_material": lambda scene: (
-        config["duplicates_material"]["preset"],
-        material_overrides(scene),
-    ),
-}
+
+
+def configured_training(source, scene):
+    """(preset, overrides) of the scene's recovery stage as configured."""
+    if source == "milo":
+        return config["milo"]["preset"], milo_overrides(scene)
+    return config["duplicates_material"]["preset"], material_overrides(scene)
 
 
 def run_label(source, change):
@@ -916,7 +916,7 @@ def recovery_runs(scene):
         raise WorkflowError(
             f"{where}: expected {{base: {{...}}, runs: [{{...}}, ...]}}, got {sweep!r}"
         )
-    preset, overrides = CONFIGURED[source](scene)
+    preset, overrides = configured_training(source, scene)
     runs = {}
     for change in sweep["runs"]:
         if not isinstance(change, dict):

@@ -231,7 +231,7 @@ def _check_recovery(runs, knee, device) -> dict:
         "seed": seed,
         "iteration": last["iteration"],
         "label": row["label"],
-        "novel_view_psnr_db": last.get("novel_view_psnr_db", last.get("relighting_psnr_db")),
+        **{k: last[k] for k in ("novel_view_psnr_db", "relighting_psnr_db") if last.get(k) is not None},
         "seconds": again["seconds"],
     }
 
