@@ -55,7 +55,7 @@ def sweep(tmp_path):
     rows = []
     for run in (big, small):
         rows += recovery.run_rows(run["dir"], run["metrics"], run["source"], run["label"], False, run["overrides"])
-    knee = front.knee(stage._scored(rows), "recovery_error")
+    knee = front.state_training_error(front.knee(stage._scored(rows), "recovery_error"))
     return [big, small], knee
 
 
@@ -78,6 +78,14 @@ def test_the_knee_is_the_cheap_run_and_its_snippet_selects_it(sweep):
     assert front.snippet(row) == {"milo": {"overrides": {"rays": 2048, "iterations": 20}}}
     # the scene's held-out views are its own setting, not pasted into milo's
     assert front.snippet(row | {"overrides": {"holdout": ["v.exr"]}}) == {"milo": {"overrides": {"iterations": 20}}}
+
+
+def test_a_training_knee_states_at_least_the_bound_it_was_chosen_by(sweep):
+    _, knee = sweep
+    assert knee["stated_error"] == pytest.approx(0.035 * 1.25)  # above 2 x 0.02
+    row = knee["row"] | {"recovery_error": 0.03}  # plus 25 %: 0.0375, below 2 x 0.02
+    looser = front.state_training_error(front.knee([knee["best"], row], "recovery_error"))
+    assert looser["stated_error"] == pytest.approx(2 * 0.02) and "2x of the best" in looser["stated_basis"]
 
 
 def test_knee_trained_again_on_another_seed_meets_its_stated_error(sweep, monkeypatch):

@@ -47,9 +47,7 @@ RULE_OF_OUTPUT = {
         "report": "evaluate",
         "edits": "edit",
         # the recovery sweep of the test config (accuracy.recovery.quick), a job per run
-        **dict.fromkeys(
-            (f"accuracy_runs/{run}" for run in ("milo", "milo-layers3-width32")), "recovery_run"
-        ),
+        **dict.fromkeys((f"accuracy_runs/{run}" for run in ("milo", "milo-layers3-width32")), "recovery_run"),
     },
     "boxes": {
         **{k: v for k, v in _SHARED.items() if k != "gradients"},
@@ -140,7 +138,10 @@ def test_recovery_sweep_trains_each_run_and_the_knee_meets_its_error_on_a_second
             ]["seed"]
         )
         assert check["iteration"] == knee["row"]["iteration"]
-        assert check["stated_error"] == knee["stated_error"] == pytest.approx(knee["error"] * 1.25)
+        # the knee's error plus 25 %, or within 2x of the best if that is larger (a training
+        # run's spread over seeds is not known from one seed: front.state_training_error)
+        best = knee["best"]["recovery_error"]
+        assert check["stated_error"] == knee["stated_error"] == pytest.approx(max(knee["error"] * 1.25, 2 * best))
         assert check["error"] <= check["stated_error"], (scene, knee["row"]["label"], check)
         assert check["met"]
         assert (

@@ -81,8 +81,21 @@ def knee(rows, error_key: str, factor: float = KNEE_FACTOR) -> dict | None:
         "error_key": error_key,
         "error": chosen[error_key],
         "stated_error": chosen[error_key] * (1 + SEED_MARGIN),
+        "stated_basis": f"the measured error plus {SEED_MARGIN:.0%}",
         "speedup_over_best": best["time_s"] / chosen["time_s"],
     }
+
+
+def state_training_error(knee: dict) -> dict:
+    """A training run's knee states the bound it was chosen by, ``factor`` x the best measured,
+    where that is the larger: one seed does not say how far another seed's training lands (on the
+    demo room MILO's 50-iteration error rose 43 % on a second seed, past the 25 % margin that
+    covers a render's noise)."""
+    bound = knee["factor"] * knee["best"][knee["error_key"]]
+    if bound > knee["stated_error"]:
+        knee["stated_error"] = bound
+        knee["stated_basis"] = f"within {knee['factor']:g}x of the best measured"
+    return knee
 
 
 def snippet(row: dict, default_features: dict | None = None) -> dict:
