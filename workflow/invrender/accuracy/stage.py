@@ -366,6 +366,7 @@ def html_page(document: dict, rows: list[dict]) -> str:
             "configuration": _describe(k["row"]),
             "error": k["error"],
             "stated error": k["stated_error"],
+            "stated as": k.get("stated_basis"),
             "seconds": k["row"]["time_s"],
             "best": _describe(k["best"]),
             "best error": k["best"][k["error_key"]],
