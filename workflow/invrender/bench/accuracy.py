@@ -62,11 +62,12 @@ def snakemake_command(work, budget: str, device: str | None) -> list[str]:
         sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(work),
         "--configfile", str(REPO / "config" / "config.yaml"),
         "--workflow-profile", str(REPO / "workflow" / "profiles" / "local"),
+        *(f"results/{scene}/accuracy" for scene in SCENES),
         "--config", f"accuracy={{budget: {budget}}}",
     ]  # fmt: skip
-    if device:
+    if device:  # --config takes every value after it: last
         command.append(f"device={device}")
-    return command + [f"results/{scene}/accuracy" for scene in SCENES]
+    return command
 
 
 def job_times(results: Path) -> list[dict]:
