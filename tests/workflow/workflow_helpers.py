@@ -112,6 +112,7 @@ FULL_RUN_JOBS = {
     "evaluate": 1,
     "evaluate_duplicates": 1,
     "edit": 1,
+    "recovery_run": 3,  # the test config's recovery sweep: 2 MILO runs, 1 of the material stage
     "accuracy": 2,
     "summary": 2,
     "all": 1,

@@ -326,6 +326,7 @@ def _spheres(values) -> list[dict] | None:
 
 def cmd_accuracy(args):
     from .accuracy import stage
+    from .accuracy.runs import read_run
     from .scene.types import SceneError
 
     runs = []
@@ -339,7 +340,9 @@ def cmd_accuracy(args):
             raise SceneError(
                 "accuracy --run", "run", f"SOURCE=DIR (e.g. duplicates_material=results/x/material), got {entry!r}"
             )
-        runs.append({"dir": directory, "source": source, "label": source, "default": not runs})
+        metrics = args.metrics if not runs else None  # the configured run's score
+        runs.append({"dir": directory, "metrics": metrics, "source": source, "label": source, "default": not runs})
+    runs += [read_run(directory) for directory in args.sweep or []]
     stage.run(
         args.scene,
         args.features,
@@ -359,6 +362,31 @@ def cmd_assets(args):
     from .assets.tool import run
 
     run(args.what, args.out, args.user, args.shots, args.seed)
+
+
+def cmd_accuracy_run(args):
+    from .accuracy import runs
+    from .scene.types import SceneError
+
+    inputs = {}
+    for entry in args.input or []:
+        name, sep, path = entry.partition("=")
+        if not sep or not path:
+            raise SceneError(
+                "accuracy-run --input", "input", f"NAME=PATH (e.g. geometry=results/x/geometry), got {entry!r}"
+            )
+        inputs[name] = path
+    runs.train_and_score(
+        args.out,
+        args.source,
+        inputs,
+        args.preset,
+        _key_values(args.set),
+        label=args.label,
+        spp=args.spp,
+        seed=args.seed,
+        device=args.device,
+    )
 
 
 def cmd_summary(args):
@@ -669,9 +697,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="directory to write (accuracy_vs_time.csv, accuracy.json, plots)")
     p.add_argument("--images", help="the captured images: the gradient sweep's loss (none: no gradient sweep)")
     p.add_argument("--milo", help="a MILO training directory (log.csv, training.json): the recovery rows")
-    p.add_argument("--metrics", help="evaluate's metrics.json: its scored snapshots are the recovery's errors")
+    p.add_argument(
+        "--metrics", help="evaluate's metrics.json of the configured run (--milo, else the first --run): its scores"
+    )
     p.add_argument(
         "--run", action="append", metavar="SOURCE=DIR", help="another training run (log.csv, training.json), repeatable"
+    )
+    p.add_argument(
+        "--sweep", action="append", metavar="DIR", help="a recovery run of `invrender accuracy-run`, repeatable"
     )
     p.add_argument("--budget", default="quick", help="quick (CI, seconds to a minute) or full (the README's figures)")
     p.add_argument("--default-spp", type=int, default=256, help="the configured render.spp (highlighted)")
@@ -692,6 +725,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--shots", type=int, default=5, help="accuracy: photo-like views of each asset")
     p.add_argument("--seed", type=int, default=0, help="accuracy: the shots' random seed")
     p.set_defaults(func=cmd_assets)
+
+    p = stages.add_parser(
+        "accuracy-run", help="one recovery configuration trained, baked and scored (rule recovery_run, issue 15)"
+    )
+    p.add_argument("--source", required=True, help="the recovery stage: milo or duplicates_material")
+    p.add_argument("--out", required=True, help="directory to write (run.json, train/, scene/, score/)")
+    p.add_argument(
+        "--input",
+        action="append",
+        metavar="NAME=PATH",
+        help="the stage's inputs: milo geometry, cameras, images, truth (the truth scene); duplicates_material "
+        "geometry, cameras, duplicates, masks, segmentation, truth (the capture's ground_truth), images",
+    )
+    p.add_argument("--preset", required=True, help="the stage's preset")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a preset setting (JSON value)")
+    p.add_argument("--label", help="the run's name in the plots (default: the --out folder's name)")
+    p.add_argument("--spp", type=int, default=4, help="evaluate's spp for the final scene's renders")
+    p.add_argument("--seed", type=int, default=0, help="evaluate's seed")
+    p.add_argument("--device")
+    p.set_defaults(func=cmd_accuracy_run)
 
     p = stages.add_parser("summary", help="a scene's metrics beside the papers' and each rule's time and memory")
     p.add_argument("--results", required=True, help="the scene's results folder (results/{scene})")

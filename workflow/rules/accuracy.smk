@@ -1,3 +1,35 @@
+rule recovery_run:
+    """One configuration of the scene's recovery sweep (config accuracy.recovery): its stage
+    trained with the run's settings, the maps baked and scored against the truth, each by the
+    stage's own command (`invrender accuracy-run`: run.json, train/, scene/, score/)."""
+    input:
+        unpack(recovery_run_inputs),
+    output:
+        directory("results/{scene}/accuracy_runs/{run}"),
+    log:
+        "results/{scene}/logs/recovery_run/{run}.log",
+    benchmark:
+        "results/{scene}/benchmarks/recovery_run/{run}.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern(SYNTHETIC),
+        run="[A-Za-z0-9.-]+",
+    conda:
+        "../../envs/render.yaml"
+    threads: 2
+    resources:
+        mem_mb=8000,
+        runtime=accuracy_runtime,
+        gpu=gpu_request,
+    params:
+        options=recovery_run_options,
+        spp=recovery_score_spp,
+        seed=config["evaluate"]["seed"],
+        device=device_option,
+    shell:
+        "invrender --log {log} accuracy-run --out {output} {params.options} --spp {params.spp}"
+        " --seed {params.seed} {params.device}"
+
+
 rule accuracy:
     """What accuracy costs in time on this scene: every knob of the forward renderer, the
     gradients and the training run, each against a converged reference of the same scene;

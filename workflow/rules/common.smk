@@ -860,11 +860,14 @@ MILO_RUNTIME = {
 }  # minutes a job may run (a cluster's --time)
 
 
+def milo_overrides(scene):
+    """The scene's held-out views and each override of the preset."""
+    return {"holdout": SCENES[scene]["holdout"], **config["milo"]["overrides"]}
+
+
 def milo_settings(wildcards):
     """`--set key=value` for the scene's held-out views and each override of the preset."""
-    return set_options(
-        {"holdout": SCENES[wildcards.scene]["holdout"], **config["milo"]["overrides"]}
-    )
+    return set_options(milo_overrides(wildcards.scene))
 
 
 MATERIAL_RUNTIME = {
@@ -873,16 +876,18 @@ MATERIAL_RUNTIME = {
 }  # minutes a duplicates_material job may run
 
 
+def material_overrides(scene):
+    """Config `duplicates_material.overrides`, then the scene's own `duplicates_material`."""
+    return {
+        **config["duplicates_material"]["overrides"],
+        **SCENES[scene].get("duplicates_material", {}),
+    }
+
+
 def material_settings(wildcards):
     """`--set key=value` for each override: config `duplicates_material.overrides`, then the
     scene's own `duplicates_material` mapping."""
-    scene = SCENES[wildcards.scene]
-    return set_options(
-        {
-            **config["duplicates_material"]["overrides"],
-            **scene.get("duplicates_material", {}),
-        }
-    )
+    return set_options(material_overrides(wildcards.scene))
 
 
 def material_runtime(wildcards):
@@ -932,10 +937,14 @@ def accuracy_inputs(wildcards):
     scene = wildcards.scene
     if mode(scene) == "duplicates":
         material = f"results/{scene}/material"
-        return {
+        inputs = {
             "training": f"{material}/training.json",
             "log_csv": f"{material}/log.csv",
+            "runs": recovery_run_dirs(wildcards),
         }
+        if is_synthetic(scene):
+            inputs["evaluation"] = f"results/{scene}/report"
+        return inputs
     if mode(scene) != "multiview":
         return {}
     inputs = {
@@ -945,7 +954,122 @@ def accuracy_inputs(wildcards):
     }
     if is_synthetic(scene):
         inputs["evaluation"] = f"results/{scene}/report"
+    inputs["runs"] = recovery_run_dirs(wildcards)
     return inputs
+
+
+# The recovery sweep (the recovery_run rule), each configuration of the scene's recovery stage a
+# job of its own, named by what it changes, e.g. milo-rays8192, milo-layers2-width32.
+RECOVERY_SOURCE = {"multiview": "milo", "duplicates": "duplicates_material"}
+
+
+def configured_training(source, scene):
+    """(preset, overrides) of the scene's recovery stage as configured."""
+    if source == "milo":
+        return config["milo"]["preset"], milo_overrides(scene)
+    return config["duplicates_material"]["preset"], material_overrides(scene)
+
+
+def run_label(source, change):
+    """A run's name from what it changes: letters, digits and dashes (a wildcard, a folder)."""
+    parts = [f"{key}{value}" for key, value in change.items()]
+    return re.sub(r"[^A-Za-z0-9.-]+", "", "-".join([source.replace("_", "-"), *parts]))
+
+
+def recovery_runs(scene):
+    """{label: {"source", "preset", "overrides"}} of the scene's recovery sweep (config
+    accuracy.recovery for the budget): the stage's configured preset and overrides, then the
+    budget's base, then the run's own. Only synthetic scenes: a run is scored by the truth.
+    """
+    source = RECOVERY_SOURCE.get(mode(scene))
+    if source is None or not is_synthetic(scene) or not has_cameras(scene):
+        return {}
+    budget = config["accuracy"]["budget"]
+    where = f"config: accuracy.recovery.{budget}.{source}"
+    sweep = config["accuracy"]["recovery"][budget].get(source)
+    if not isinstance(sweep, dict) or not isinstance(sweep.get("runs"), list):
+        raise WorkflowError(
+            f"{where}: expected {{base: {{...}}, runs: [{{...}}, ...]}}, got {sweep!r}"
+        )
+    preset, overrides = configured_training(source, scene)
+    runs = {}
+    for change in sweep["runs"]:
+        if not isinstance(change, dict):
+            raise WorkflowError(
+                f"{where}.runs: expected mappings of settings, got {change!r}"
+            )
+        label = run_label(source, change)
+        if label in runs:
+            raise WorkflowError(f"{where}.runs: {change!r} is there twice")
+        own = {key: value for key, value in change.items() if key != "preset"}
+        runs[label] = {
+            "source": source,
+            "preset": change.get("preset", preset),
+            "overrides": {**overrides, **sweep.get("base", {}), **own},
+        }
+    return runs
+
+
+def recovery_run_dirs(wildcards):
+    return [
+        f"results/{wildcards.scene}/accuracy_runs/{label}"
+        for label in recovery_runs(wildcards.scene)
+    ]
+
+
+def recovery_run(wildcards):
+    runs = recovery_runs(wildcards.scene)
+    if wildcards.run not in runs:
+        raise WorkflowError(
+            f"results/{wildcards.scene}/accuracy_runs/{wildcards.run}: not a run of the scene's "
+            f"recovery sweep ({', '.join(runs) or 'none'})"
+        )
+    return runs[wildcards.run]
+
+
+def recovery_run_inputs(wildcards):
+    """What the run's stage reads, and the truth that scores it."""
+    scene = wildcards.scene
+    inputs = {
+        "geometry": f"results/{scene}/geometry",
+        "cameras": f"results/{scene}/cameras",
+        "capture": f"results/{scene}/capture",
+    }
+    if recovery_run(wildcards)["source"] == "duplicates_material":
+        inputs["duplicates"] = f"results/{scene}/duplicates"
+        inputs["segmentation"] = segmentation_dir(wildcards)
+    return inputs
+
+
+def recovery_run_options(wildcards):
+    """accuracy-run's --source, --preset, --set and --input flags."""
+    run, scene = recovery_run(wildcards), wildcards.scene
+    inputs = {
+        "geometry": f"results/{scene}/geometry",
+        "cameras": f"results/{scene}/cameras",
+    }
+    if run["source"] == "milo":
+        inputs |= {
+            "images": f"results/{scene}/cameras/images",
+            "truth": f"results/{scene}/capture/ground_truth/scene",
+        }
+    else:
+        inputs |= {
+            "duplicates": f"results/{scene}/duplicates",
+            "masks": instance_masks(wildcards),
+            "segmentation": f"results/{scene}/segmentation",
+            "truth": f"results/{scene}/capture/ground_truth",
+            "images": f"results/{scene}/capture/images",
+        }
+    flags = [
+        f"--source {run['source']}",
+        f"--preset {shlex.quote(run['preset'])}",
+        set_options(run["overrides"]),
+    ]
+    flags += [
+        f"--input {shlex.quote(f'{name}={path}')}" for name, path in inputs.items()
+    ]
+    return " ".join(flags)
 
 
 def accuracy_options(wildcards):
@@ -956,14 +1080,21 @@ def accuracy_options(wildcards):
             f"--images results/{scene}/cameras/images",
             f"--milo results/{scene}/milo",
         ]
-        if is_synthetic(scene):
-            options.append(f"--metrics results/{scene}/report/metrics.json")
     if mode(scene) == "duplicates":
         options.append(f"--run duplicates_material=results/{scene}/material")
+    if is_synthetic(
+        scene
+    ):  # the configured run's scores (evaluate's), and the sweep's runs
+        options.append(f"--metrics results/{scene}/report/metrics.json")
+    options += [f"--sweep {path}" for path in recovery_run_dirs(wildcards)]
     camera = config["accuracy"]["camera"]
     if camera:
         options.append(f"--camera {shlex.quote(camera)}")
     return " ".join(options)
+
+
+def recovery_score_spp(wildcards):
+    return config["accuracy"]["recovery"][config["accuracy"]["budget"]]["score_spp"]
 
 
 def accuracy_runtime(wildcards):

@@ -26,6 +26,8 @@ PANELS = {
             ("recovery_error", None),
             ("light_maps_mse", "light maps MSE"),
             ("novel_view_mse", "novel-view MSE (10^(-PSNR/10))"),
+            ("env_mse", "sky MSE (kg, SfD's)"),  # a duplicates run's
+            ("relighting_mse", "relighting MSE (10^(-PSNR/10))"),
         ],
         "training wall seconds",
     ),

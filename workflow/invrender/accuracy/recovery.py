@@ -1,6 +1,7 @@
 """Recovery: what the training runs already recorded, as error against training time.
 
-Nothing is trained here. A training run is a directory holding
+Nothing is trained here (runs.py trains the sweep's runs, each a job of its own). A training
+run is a directory holding
 - ``log.csv``: one row per iteration with at least ``iteration``, ``wall_time`` (seconds since
   the start) and a loss column (MILO's ``image``: the photometric loss on its ray batch);
 - ``training.json`` (optional): ``{"preset": ..., "settings": {...}}``, the knobs of the run;
@@ -79,6 +80,29 @@ def scored_rows(table: list[dict], run: dict, source: str, label: str) -> list[d
     return rows
 
 
+def appearance_rows(metrics: dict, run: dict, training: dict, source: str, label: str) -> list[dict]:
+    """A duplicates material run scored by evaluate (its final maps, metrics.json's
+    "appearance"): one row, the albedo's MSE the error (10^(-PSNR/10) of SfD's scaled, gamma
+    encoded albedo), the sky's MSE and relighting beside; none without an albedo score."""
+    ours = ((metrics.get("appearance") or {}).get("table1") or {}).get("ours") or {}
+    if ours.get("albedo_psnr_db") is None:
+        return []
+    relit = ours.get("relighting_psnr_db")
+    return [
+        {
+            **_knobs(run, source, label),
+            "iteration": int(training.get("iterations", run["settings"].get("iterations", 0))),
+            "time_s": float(training["training_seconds"]),
+            "recovery_error": 10 ** (-ours["albedo_psnr_db"] / 10),
+            "error_name": "albedo MSE (10^(-PSNR/10))",
+            "albedo_psnr_db": ours["albedo_psnr_db"],
+            "env_mse": ours.get("env_mse"),
+            "relighting_psnr_db": relit,
+            "relighting_mse": None if relit is None else 10 ** (-relit / 10),
+        }
+    ]
+
+
 def log_rows(log: list[dict], run: dict, source: str, label: str, loss_column: str) -> list[dict]:
     """Without a truth: the training loss, averaged over LOG_BINS stretches of the run (one
     iteration's loss is one ray batch's, too noisy to read a curve from)."""
@@ -110,22 +134,29 @@ def run_rows(
     label: str = "configured",
     default: bool = True,
     overrides: dict | None = None,
+    preset: str | None = None,
 ) -> list[dict]:
     """The rows of one training run: scored snapshots when ``metrics_path`` (evaluate's
-    metrics.json) has a training table, else its log's loss. ``default``: this is the
-    configured run, whose last row is the configured default. ``overrides``: the milo overrides
-    that select this run (the knee's snippet), for a variant run."""
+    metrics.json) has a training table, the final maps' appearance for a duplicates run, else
+    its log's loss. ``default``: this is the configured run, whose last row is the configured
+    default. ``overrides`` (and ``preset``, where the run changed it): the config that selects
+    this run (the knee's snippet), for a variant run."""
     run = run_settings(run_dir)
-    table = None
+    metrics = {}
     if metrics_path is not None and Path(metrics_path).is_file():
-        table = json.loads(Path(metrics_path).read_text()).get("training")
-    if table:
-        rows = scored_rows(table, run, source, label)
-    else:
+        metrics = json.loads(Path(metrics_path).read_text())
+    rows = []
+    if metrics.get("training"):
+        rows = scored_rows(metrics["training"], run, source, label)
+    elif metrics.get("appearance"):
+        training = json.loads((Path(run_dir) / "training.json").read_text())
+        rows = appearance_rows(metrics, run, training, source, label)
+    if not rows:
         rows = log_rows(read_log(Path(run_dir) / "log.csv"), run, source, label, SOURCES.get(source, "image"))
     for row in rows:
         row["default"] = False
         row["overrides"] = overrides or {}
+        row["snippet_preset"] = preset
         row["pasteable"] = True
         row["cause"] = None
     if rows and default:

@@ -14,8 +14,8 @@
   triangles, beside a B = 1 render of ours and Mitsuba's (``traversal.py``; docs/benchmarks.md).
 - ``milo``: MILO recovery on the benchmark room (config/benchmark.yaml) beside the paper's Table 3,
   and the Fig. 12 ablation (``milo.py``; docs/benchmarks.md).
-- ``accuracy``: the accuracy stage's full sweep on the demo room, with bench milo's runs as the
-  recovery rows (``accuracy.py``; docs/accuracy.md).
+- ``accuracy``: the accuracy stage's full sweep on the demo's scenes through the workflow, the
+  recovery sweep's training runs included (``accuracy.py``; docs/accuracy.md).
 - ``duplicates``: Structure from Duplicates on the synthetic fixtures beside the paper's Table 2,
   with the rotation-search and SIFT ablations (``duplicates.py``; docs/benchmarks.md).
 

@@ -1,27 +1,34 @@
-"""`invrender bench accuracy`: the accuracy stage's `full` sweep (`--quick`: its `quick` one) on
-the demo room, with the MILO runs of `bench milo` as the recovery rows where they exist.
+"""`invrender bench accuracy`: the accuracy stage's `full` sweep (`--quick`: its `quick` one)
+on the demo's two scenes, through the workflow itself.
 
-The room is the demo's generator (config/config.yaml's `room`, two of its views at 96 x 72),
-its features as the features stage decides them and its captured images rendered here
-(``demo_room``, which the tests share). The recovery rows reuse `bench milo`'s work directory
-(``WORK/template`` and ``WORK/plain``: each a MILO run with evaluate's scored snapshots) rather
-than training again; without it there are none. Writes ``OUT/accuracy/`` as the stage does
-(docs/accuracy.md).
+Runs `snakemake` on the demo config (config/config.yaml) in ``WORK`` (default
+results/bench/accuracy), with `accuracy.budget` set, for each scene's `accuracy` target: the
+demo chain (synthesize, cameras, geometry, MILO-Net or the duplicates stages, bake, evaluate),
+the recovery sweep's runs (rule recovery_run, one job each, config accuracy.recovery.<budget>),
+then the accuracy rule (the forward and gradient sweeps on the recovered scene, the recovery
+rows from the configured run and the sweep's, the knees, the recovery knee trained again on
+another seed). Everything is cached in ``WORK``: a second call redoes only what changed. Copies
+the room's accuracy/ to ``OUT/accuracy/`` and the boxes' to ``OUT/accuracy_boxes/``, with each
+rule's time from its benchmark record in ``OUT/accuracy*/jobs.csv``.
+
+``demo_room`` writes the demo room's truth scene, features and captured images; the accuracy
+tests share it.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import logging
-import tempfile
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 log = logging.getLogger("invrender.bench")
 
-DEFAULT_WORK = "results/bench/milo"  # bench milo's
+DEFAULT_WORK = "results/bench/accuracy"
 CAPTURE_SPP = 16  # the captured images: the gradient sweep's loss
-ARMS = {"template": {}, "plain": {"template": False}}  # bench milo's arms and their overrides
-DEMO_RENDER_SPP, DEMO_GRADIENTS_SPP = 256, 16  # config/config.yaml's render.spp, gradients.spp
 
 
 def demo_room(root, cameras: int = 2, capture_spp: int = CAPTURE_SPP, device=None):
@@ -46,41 +53,56 @@ def demo_room(root, cameras: int = 2, capture_spp: int = CAPTURE_SPP, device=Non
     return scene, features
 
 
-def milo_runs(work) -> list[dict]:
-    """bench milo's arms as training runs, the template arm (the preset as configured) first."""
-    runs = []
-    for arm, overrides in ARMS.items():
-        folder = Path(work) / arm
-        if (folder / "milo" / "log.csv").is_file():
-            runs.append(
-                {
-                    "dir": folder / "milo",
-                    "metrics": folder / "report" / "metrics.json",
-                    "source": "milo",
-                    "label": f"cpu preset, {arm}",
-                    "default": arm == "template",
-                    "overrides": overrides,
-                }
-            )
-    return runs
+REPO = Path(__file__).resolve().parents[3]
+SCENES = {"room": "accuracy", "boxes": "accuracy_boxes"}  # scene -> folder under OUT
+
+
+def snakemake_command(work, budget: str, device: str | None) -> list[str]:
+    command = [
+        sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(work),
+        "--configfile", str(REPO / "config" / "config.yaml"),
+        "--workflow-profile", str(REPO / "workflow" / "profiles" / "local"),
+        *(f"results/{scene}/accuracy" for scene in SCENES),
+        "--config", f"accuracy={{budget: {budget}}}",
+    ]  # fmt: skip
+    if device:  # --config takes every value after it: last
+        command.append(f"device={device}")
+    return command
+
+
+def job_times(results: Path) -> list[dict]:
+    """Each rule's wall and CPU seconds from its benchmark record (results/{scene}/benchmarks)."""
+    rows = []
+    for path in sorted((results / "benchmarks").rglob("*.tsv")):
+        with open(path, newline="") as handle:
+            record = next(csv.DictReader(handle, delimiter="\t"))
+        rule = str(path.relative_to(results / "benchmarks").with_suffix(""))
+        rows.append({"job": rule, "wall_s": float(record["s"]), "cpu_s": float(record["cpu_time"])})
+    return rows
 
 
 def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, work=DEFAULT_WORK) -> dict:
-    from ..accuracy import stage
+    from ..render.measure import write_csv
+    from ..scene.atomic import MARKER, atomic_dir
 
-    runs = milo_runs(work)
-    if not runs:
-        log.warning("bench accuracy: no bench milo runs under %s: no recovery rows", work)
-    with tempfile.TemporaryDirectory(prefix="invrender-accuracy-") as root:
-        demo_room(root, device=device)
-        return stage.run(
-            Path(root) / "scene",
-            Path(root) / "features.json",
-            Path(out) / "accuracy",
-            images_dir=Path(root) / "images",
-            runs=runs,
-            budget="quick" if quick else "full",
-            default_spp=DEMO_RENDER_SPP,
-            gradient_spp=DEMO_GRADIENTS_SPP,
-            device=device,
-        )
+    budget = "quick" if quick else "full"
+    work = Path(work).absolute()
+    work.mkdir(parents=True, exist_ok=True)
+    log.info("bench accuracy: the %s budget through the workflow in %s", budget, work)
+    done = subprocess.run(
+        snakemake_command(work, budget, device), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    (work / "bench_accuracy.log").write_text(done.stdout)
+    if done.returncode != 0:
+        tail = "\n".join(done.stdout.splitlines()[-30:])
+        raise RuntimeError(f"bench accuracy: snakemake failed ({done.returncode}); {work}/bench_accuracy.log:\n{tail}")
+    documents = {}
+    for scene, folder in SCENES.items():
+        results = work / "results" / scene
+        with atomic_dir(Path(out) / folder, kind="accuracy") as tmp:
+            for path in (results / "accuracy").iterdir():
+                if path.is_file() and path.name != MARKER:
+                    shutil.copy2(path, Path(tmp) / path.name)
+            write_csv(Path(tmp) / "jobs.csv", job_times(results))
+        documents[scene] = json.loads((results / "accuracy" / "accuracy.json").read_text())
+    return documents
