@@ -174,3 +174,19 @@ def test_poses_option_belongs_to_this_bench():
     args = SimpleNamespace(quick=True, out="x", device=None, poses="truth")
     with pytest.raises(SceneError, match="--poses"):
         run_benchmark("duplicates", args)
+
+
+def test_truth_segmentation_keeps_the_true_ids(tmp_path):
+    import numpy as np
+
+    from invrender.scene.images import read_mask, write_mask
+
+    ids = np.zeros((6, 8), np.uint16)
+    ids[4:6, 0:2] = 1  # copy 1 is last in reading order: segment's provided backend would call it 2
+    ids[0:2, 5:8] = 2
+    write_mask(tmp_path / "view_000.png", ids)
+    bench.write_truth_segmentation(tmp_path / "view_000.png", tmp_path / "segmentation")
+    assert (read_mask(tmp_path / "segmentation" / "masks" / "view_000.png") == ids).all()
+    table = json.loads((tmp_path / "segmentation" / "instances.json").read_text())
+    assert (table["image"], table["width"], table["height"]) == ("view_000.exr", 8, 6)
+    assert [(e["id"], e["area"]) for e in table["instances"]] == [(1, 4), (2, 6)]

@@ -116,11 +116,10 @@ def recovered_inputs(scene_dir: Path, row: Path) -> Inputs:
 def make_truth_inputs(capture: Path, out: Path, resolution: int):
     """out/geometry (the true object mesh, its atlas rasterised from its own UVs: a recovered and
     a true texel at the same UV are the same surface point), out/duplicates (the true poses and
-    mesh) and out/segmentation (the true masks through segment's provided backend)."""
+    mesh) and out/segmentation (the true masks, `write_truth_segmentation`)."""
     from ..scene.atlas import rasterize_atlas
     from ..scene.atomic import atomic_dir
     from ..scene.mesh_io import read_mesh, write_ply
-    from ..segment import stage as segment
 
     truth = capture / "ground_truth"
     with atomic_dir(out, kind="bench-truth-inputs") as tmp:
@@ -132,10 +131,27 @@ def make_truth_inputs(capture: Path, out: Path, resolution: int):
         (tmp / "duplicates").mkdir()
         for name in ("poses.json", "object.ply"):
             shutil.copy(truth / name, tmp / "duplicates" / name)
-        segment.run(
-            capture / "images" / "view_000.exr", tmp / "segmentation", backend="provided",
-            masks=truth / "masks" / "view_000.png",
-        )  # fmt: skip
+        write_truth_segmentation(truth / "masks" / "view_000.png", tmp / "segmentation")
+
+
+def write_truth_segmentation(mask: Path, out: Path) -> None:
+    """The true instance-id PNG as the segment stage lays it out (masks/, instances.json), its ids
+    kept: they name the true poses (segment's provided backend renumbers them in reading order,
+    which would pair each copy's mask with another copy's pose)."""
+    from ..scene.images import read_mask
+    from ..segment.stage import instance_table
+
+    ids = read_mask(mask)
+    (out / "masks").mkdir(parents=True)
+    shutil.copy(mask, out / "masks" / mask.name)
+    document = {
+        "image": mask.with_suffix(".exr").name,
+        "width": int(ids.shape[1]),
+        "height": int(ids.shape[0]),
+        "backend": "truth",
+        "instances": instance_table(ids, {i: 1.0 for i in range(1, int(ids.max()) + 1)}),
+    }
+    (out / "instances.json").write_text(json.dumps(document, indent=2) + "\n")
 
 
 def recovered_poses(preset: str, work: Path, spp: int) -> None:
