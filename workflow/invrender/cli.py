@@ -773,6 +773,7 @@ def build_parser() -> argparse.ArgumentParser:
     dup = p.add_argument_group("bench duplicates")
     dup.add_argument("--scenes", help="comma-separated duplicates presets (default the -hd boxes and cans)")
     dup.add_argument("--variants", help="comma-separated: default, no-rotation-search, sift (default all on box-10-hd)")
+    dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
     render = p.add_argument_group("bench render")
     render.add_argument(
         "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"

@@ -18,6 +18,8 @@
   recovery sweep's training runs included (``accuracy.py``; docs/accuracy.md).
 - ``duplicates``: Structure from Duplicates on the synthetic fixtures beside the paper's Table 2,
   with the rotation-search and SIFT ablations (``duplicates.py``; docs/benchmarks.md).
+- ``duplicates-material``: the shared material and sky of the duplicates fixtures, with true and
+  recovered poses, beside the paper's Tables 1 and 2 (``duplicates_material.py``; docs/benchmarks.md).
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
@@ -29,11 +31,22 @@ from __future__ import annotations
 import importlib
 
 # modules here: run(quick, out, device)
-BENCHMARKS = ("render", "gradients", "export", "milo", "scaling", "traversal", "duplicates", "accuracy")
+BENCHMARKS = (
+    "render",
+    "gradients",
+    "export",
+    "milo",
+    "scaling",
+    "traversal",
+    "duplicates",
+    "duplicates-material",
+    "accuracy",
+)
 OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
     "render": ("sections",),
     "duplicates": ("scenes", "variants", "work"),
+    "duplicates-material": ("scenes", "poses", "work"),
     "accuracy": ("work",),
 }  # what only some take
 
@@ -55,7 +68,7 @@ def run_benchmark(what: str, args) -> dict:
         raise SceneError(
             f"bench {what}", ", ".join(f"--{key}" for key in stray), f"options of bench {owners[stray[0]]} only"
         )
-    run = importlib.import_module(f".{what}", __name__).run
+    run = importlib.import_module(f".{what.replace('-', '_')}", __name__).run
     return run(
         quick=bool(getattr(args, "quick", False)),
         out=getattr(args, "out", "docs/benchmarks"),

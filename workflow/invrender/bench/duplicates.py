@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..scene.types import SceneError
-from .harness import PeakRSS, format_table, quiet_pyopencl, run_report
+from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_report
 
 log = logging.getLogger("invrender.bench")
 
@@ -93,57 +93,6 @@ def settings_from(quick: bool, scenes, variants, work) -> Settings:
 # ---------------------------------------------------------------------------------------------
 # Steps
 # ---------------------------------------------------------------------------------------------
-
-
-def measure(fn, *args, **kwargs) -> tuple[object, dict]:
-    """(result, or the SceneError it stopped with; {wall_s, cpu_s, peak_rss_mb, rss_growth_mb})
-    of one call in this process."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    with PeakRSS() as memory:
-        try:
-            out = fn(*args, **kwargs)
-        except SceneError as stop:
-            out = stop
-    return out, {
-        "wall_s": time.perf_counter() - wall,
-        "cpu_s": time.process_time() - cpu,
-        "peak_rss_mb": memory.peak / 2**20,
-        "rss_growth_mb": memory.growth / 2**20,
-    }
-
-
-class Stopped(Exception):
-    """A step stopped with a SceneError, now or in an earlier run (its message in steps.json)."""
-
-
-class Ledger:
-    """steps.json in a folder: each step's measurements, written as soon as it ran, so that a
-    resumed run reports the times of the steps it skips. A step that stopped with a SceneError
-    is a result too (the ablation that registers nothing): its time and message are kept, and a
-    resumed run reports it again without running it (delete its entry to retry)."""
-
-    def __init__(self, folder: Path):
-        self.path = Path(folder) / "steps.json"
-        self.steps = json.loads(self.path.read_text()) if self.path.exists() else {}
-
-    def run(self, step: str, output: Path, fn, *args, **kwargs) -> dict | None:
-        if Path(output).exists():
-            log.info("bench duplicates: %s exists, %s skipped", output, step)
-            return self.steps.get(step)
-        if (self.steps.get(step) or {}).get("error"):
-            raise Stopped(self.steps[step]["error"])
-        out, measured = measure(fn, *args, **kwargs)
-        if isinstance(out, SceneError):
-            measured["error"] = str(out)
-        self._write(step, measured)
-        if isinstance(out, SceneError):
-            raise Stopped(str(out)) from out
-        return measured
-
-    def _write(self, step: str, measured: dict):
-        self.steps[step] = measured
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.path.write_text(json.dumps(self.steps, indent=1) + "\n")
 
 
 def _render(preset: str, out: Path, spp: int):
