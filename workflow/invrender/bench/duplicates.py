@@ -22,13 +22,12 @@ from __future__ import annotations
 import json
 import logging
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..scene.types import SceneError
-from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_report
+from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_scenes
 
 log = logging.getLogger("invrender.bench")
 
@@ -348,23 +347,12 @@ def run(
     work, out = Path(settings.work), Path(out)
     out.mkdir(parents=True, exist_ok=True)
     work.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for scene in settings.scenes:
+
+    def run_one(scene):
         log.info("bench duplicates: %s, variants %s", scene, settings.variants[scene])
-        rows += run_scene(scene, settings.variants[scene], work, settings.render_spp)
-        write_report(out, settings, rows, started, load_start, device)  # after each scene: partial runs count
-    report = write_report(out, settings, rows, started, load_start, device)
-    sys.stdout.write((out / "duplicates.md").read_text())
-    sys.stdout.flush()
-    return report
+        return run_scene(scene, settings.variants[scene], work, settings.render_spp)
 
-
-def write_report(out: Path, settings: Settings, rows, started, load_start, device) -> dict:
-    notes = []
-    if settings.mode == "quick":
-        notes.append("quick: the -ci fixtures (320 x 240), the default variant: checks the plumbing, not accuracy")
-    results = {"work": settings.work, "rows": rows, "table": [table_row(row) for row in rows]}
-    report = run_report("duplicates", settings, "not used", notes, started, load_start, device, results)
-    (out / "duplicates.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
-    write_markdown(out, report)
-    return report
+    note = "the -ci fixtures (320 x 240), the default variant: checks the plumbing, not accuracy"
+    return run_scenes(
+        "duplicates", settings, out, run_one, table_row, write_markdown, note, device, (started, load_start)
+    )

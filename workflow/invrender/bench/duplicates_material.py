@@ -27,13 +27,12 @@ import json
 import logging
 import os
 import shutil
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import duplicates as poses_bench
-from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_report
+from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_scenes
 
 log = logging.getLogger("invrender.bench")
 
@@ -407,23 +406,12 @@ def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, s
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     Path(settings.work).mkdir(parents=True, exist_ok=True)
-    rows = []
-    for scene in settings.scenes:
+
+    def run_one(scene):
         log.info("bench duplicates-material: %s, poses %s", scene, settings.poses)
-        rows += run_scene(scene, settings)
-        write_report(out, settings, rows, started, load_start, device)  # after each scene: partial runs count
-    report = write_report(out, settings, rows, started, load_start, device)
-    sys.stdout.write((out / "duplicates_material.md").read_text())
-    sys.stdout.flush()
-    return report
+        return run_scene(scene, settings)
 
-
-def write_report(out: Path, settings: Settings, rows, started, load_start, device) -> dict:
-    notes = []
-    if settings.mode == "quick":
-        notes.append("quick: the -ci fixtures (320 x 240), the ci material preset: checks the plumbing, not accuracy")
-    results = {"work": settings.work, "rows": rows, "table": [table_row(row) for row in rows]}
-    report = run_report("duplicates-material", settings, "not used", notes, started, load_start, device, results)
-    (out / "duplicates_material.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
-    write_markdown(out, report)
-    return report
+    note = "the -ci fixtures (320 x 240), the ci material preset: checks the plumbing, not accuracy"
+    return run_scenes(
+        "duplicates-material", settings, out, run_one, table_row, write_markdown, note, device, (started, load_start)
+    )

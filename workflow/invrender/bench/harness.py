@@ -429,3 +429,28 @@ def write_report(out: Path, name: str, title: str, report: dict, tables: dict, s
     sys.stdout.write(table)
     sys.stdout.flush()
     return table
+
+
+def run_scenes(name: str, settings, out: Path, run_one, table_row, write_markdown, quick_note: str, device, start):
+    """The scene loop of the per-scene benchmarks (bench duplicates, bench duplicates-material):
+    `run_one(scene) -> rows` for each of `settings.scenes`, the report (OUT/<name>.json, and the
+    markdown `write_markdown(out, report)` writes) rewritten after every scene so that partial
+    runs count, then printed. `start`: (time.time(), os.getloadavg()) when the benchmark began."""
+    stem = name.replace("-", "_")
+    rows = []
+
+    def write() -> dict:
+        notes = [f"quick: {quick_note}"] if settings.mode == "quick" else []
+        results = {"work": settings.work, "rows": rows, "table": [table_row(row) for row in rows]}
+        report = run_report(name, settings, "not used", notes, *start, device, results)
+        (out / f"{stem}.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
+        write_markdown(out, report)
+        return report
+
+    for scene in settings.scenes:
+        rows += run_one(scene)
+        write()
+    report = write()
+    sys.stdout.write((out / f"{stem}.md").read_text())
+    sys.stdout.flush()
+    return report
