@@ -59,8 +59,11 @@ def test_python_follows_ruff(command):
 
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
-    # the demo's recovery sweep is the schema's quick one: 4 MILO runs and 3 of the material stage
-    assert job_counts(result.stdout) == FULL_RUN_JOBS | {"recovery_run": 7}
+    # the demo's recovery sweep is the schema's quick one: 4 MILO runs and 3 of the material stage;
+    # its third scene, the living room photo, is synthesized and gets its room box
+    expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1}
+    expected["synthesize"] = FULL_RUN_JOBS["synthesize"] + 1
+    assert job_counts(result.stdout) == expected
 
 
 def test_every_rule_is_known():
