@@ -13,7 +13,13 @@ rule room_box:
     input:
         room_box_input,
     output:
-        directory("results/{scene}/room_box"),
+        report(
+            directory("results/{scene}/room_box"),
+            patterns=["room_box.png"],
+            caption="../report/room_box.rst",
+            category="Room",
+            labels={"scene": "{scene}", "figure": "room box"},
+        ),
     log:
         "results/{scene}/logs/room_box.log",
     benchmark:
