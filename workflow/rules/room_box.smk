@@ -15,10 +15,10 @@ rule room_box:
     output:
         report(
             directory("results/{scene}/room_box"),
-            patterns=["room_box.png"],
+            patterns=["{name}.png"],
             caption="../report/room_box.rst",
             category="Room",
-            labels={"scene": "{scene}", "figure": "room box"},
+            labels={"scene": "{scene}", "figure": "{name}"},
         ),
     log:
         "results/{scene}/logs/room_box.log",
