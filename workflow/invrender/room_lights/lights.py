@@ -7,8 +7,10 @@ windows and lamps into emissive objects.
 
 Every light is a ``Quad``: a centre, two edge vectors (the full edges, so the corners are
 centre +- e1 / 2 +- e2 / 2) and the unit normal facing into the room (the side it emits to).
-Pure geometry in the room box's world (room_box/box.py's ``RoomBox`` and the camera posed in
-it), so the sizes that are settings are fractions of the box, not meters: room.json's box is in
+Pure geometry in the room box's world (a box as room.json writes it: ``center``, ``size``,
+``yaw_deg``, world = R_y(yaw) (size * v) + center for v in the unit cube, as room_box/box.py's
+``RoomBox``, which a stage may not import, so any object with those fields does; and the camera
+posed in it), so the sizes that are settings are fractions of the box, not meters: room.json's box is in
 the depth's units (median depth 1).
 """
 
@@ -18,7 +20,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..room_box.box import RoomBox, cast_box, rotation_y
 from ..scene.cameras import pixel_directions
 from ..scene.types import Camera
 
@@ -79,24 +80,34 @@ class LightSettings:
     inset: float = 1e-3  # wall lights sit this fraction of the box inside the wall (not coplanar)
 
 
-def _frame(box: RoomBox) -> np.ndarray:
-    return rotation_y(np.radians(box.yaw_deg))
+def _frame(box) -> np.ndarray:
+    """The box's rotation R_y(yaw): its local axes as columns (room_box/box.py's rotation_y)."""
+    c, s = np.cos(np.radians(box.yaw_deg)), np.sin(np.radians(box.yaw_deg))
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-def ceiling_grid(box: RoomBox, cell: float = 0.25, shrink: float = SHRINK) -> list[Quad]:
+def _size(box) -> np.ndarray:
+    return np.asarray(box.size, np.float64).reshape(3)
+
+
+def _center(box) -> np.ndarray:
+    return np.asarray(box.center, np.float64).reshape(3)
+
+
+def ceiling_grid(box, cell: float = 0.25, shrink: float = SHRINK) -> list[Quad]:
     """The ceiling split into cells of about ``cell`` times the larger horizontal extent (at
     least one per axis), each scaled by ``shrink`` about its centre, emitting downwards."""
     R = _frame(box)
-    sx, sy, sz = box.size
+    sx, sy, sz = _size(box)
     side = cell * max(sx, sz)
     nx, nz = max(1, round(sx / side)), max(1, round(sz / side))
     quads = []
     for i in range(nx):
         for k in range(nz):
-            local = np.array([(i + 0.5) / nx - 0.5, 0.5, (k + 0.5) / nz - 0.5]) * box.size
+            local = np.array([(i + 0.5) / nx - 0.5, 0.5, (k + 0.5) / nz - 0.5]) * _size(box)
             quads.append(
                 Quad(
-                    R @ local + box.center,
+                    R @ local + _center(box),
                     R[:, 0] * sx / nx * shrink,
                     R[:, 2] * sz / nz * shrink,
                     -R[:, 1],
@@ -155,11 +166,11 @@ def behind_camera(quad: Quad, camera: Camera) -> bool:
     return bool(np.all(_to_camera(camera, quad.corners())[:, 2] <= 0))
 
 
-def wall_quads(box: RoomBox) -> list[Quad]:
+def wall_quads(box) -> list[Quad]:
     """The four walls as quads (full size, on the box's faces), normals into the room, named as
     the generator names wall segments: ``wall_+x`` is the wall at the box's local +x side."""
     R = _frame(box)
-    sx, sy, sz = box.size
+    sx, sy, sz = _size(box)
     walls = []
     for axis, across, extent in ((0, 2, sx), (2, 0, sz)):
         for sign in (-1.0, 1.0):
@@ -167,8 +178,8 @@ def wall_quads(box: RoomBox) -> list[Quad]:
             local[axis] = sign * extent / 2
             walls.append(
                 Quad(
-                    R @ local + box.center,
-                    R[:, across] * box.size[across],
+                    R @ local + _center(box),
+                    R[:, across] * _size(box)[across],
                     R[:, 1] * sy,
                     -sign * R[:, axis],
                     "wall",
@@ -178,7 +189,7 @@ def wall_quads(box: RoomBox) -> list[Quad]:
     return walls
 
 
-def invisible_wall_lights(box: RoomBox, camera: Camera, size: float = 0.5, inset: float = 1e-3) -> list[Quad]:
+def invisible_wall_lights(box, camera: Camera, size: float = 0.5, inset: float = 1e-3) -> list[Quad]:
     """One light per wall outside the camera's frustum: a window-like quad at the wall's centre,
     ``size`` of its width and height, moved ``inset`` times the box's height into the room."""
     lights = []
@@ -186,7 +197,7 @@ def invisible_wall_lights(box: RoomBox, camera: Camera, size: float = 0.5, inset
         if not in_frustum(wall, camera):
             lights.append(
                 Quad(
-                    wall.center + wall.normal * inset * box.size[1],
+                    wall.center + wall.normal * inset * _size(box)[1],
                     wall.e1 * size,
                     wall.e2 * size,
                     wall.normal,
@@ -197,7 +208,7 @@ def invisible_wall_lights(box: RoomBox, camera: Camera, size: float = 0.5, inset
     return lights
 
 
-def camera_light(box: RoomBox, camera: Camera, size: float = 0.5, offset: float = 0.05) -> Quad:
+def camera_light(box, camera: Camera, size: float = 0.5, offset: float = 0.05) -> Quad:
     """The large light behind the camera: a vertical quad ``offset`` times the box's largest
     extent behind the camera's centre (kept inside the box), facing the camera's horizontal
     forward direction, ``size`` of the box's width and height."""
@@ -209,24 +220,37 @@ def camera_light(box: RoomBox, camera: Camera, size: float = 0.5, offset: float 
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, [0.0, 1.0, 0.0])
     R = _frame(box)
-    center = camera.center - forward * offset * box.size.max()
-    local = np.clip(R.T @ (center - box.center), -box.size / 2 * 0.99, box.size / 2 * 0.99)
-    center = R @ local + box.center
+    center = camera.center - forward * offset * _size(box).max()
+    local = np.clip(R.T @ (center - _center(box)), -_size(box) / 2 * 0.99, _size(box) / 2 * 0.99)
+    center = R @ local + _center(box)
     # The box's extent across the forward direction, for the light's width.
-    width = np.abs(R.T @ right) @ box.size
+    width = np.abs(R.T @ right) @ _size(box)
     return Quad(
-        center, right * width * size, np.array([0.0, 1.0, 0.0]) * box.size[1] * size, forward, "camera", "camera"
+        center, right * width * size, np.array([0.0, 1.0, 0.0]) * _size(box)[1] * size, forward, "camera", "camera"
     )
 
 
-def window_lights(box: RoomBox, camera: Camera, segments: np.ndarray, labels: dict) -> tuple[list[Quad], list[dict]]:
+def _wall_hits(wall: Quad, origin: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (u, v) coordinates, along the wall's unit edges from its centre, of the hit points of
+    the rays that hit the wall's front within its bounds."""
+    u, v = wall.e1 / np.linalg.norm(wall.e1), wall.e2 / np.linalg.norm(wall.e2)
+    facing = directions @ wall.normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((wall.center - origin) @ wall.normal) / facing
+    points = origin + t[:, None] * directions
+    pu, pv = (points - wall.center) @ u, (points - wall.center) @ v
+    half_u, half_v = np.linalg.norm(wall.e1) / 2, np.linalg.norm(wall.e2) / 2
+    inside = (facing < 0) & (t > 0) & (np.abs(pu) <= half_u) & (np.abs(pv) <= half_v)
+    return pu[inside], pv[inside]
+
+
+def window_lights(box, camera: Camera, segments: np.ndarray, labels: dict) -> tuple[list[Quad], list[dict]]:
     """Visible windows as emissive quads and lamps as emissive segments. A window segment's
-    pixels are cast onto the box (cast_box); the quad is the bounding rectangle of those points
-    in the wall they mostly hit. ``segments``: (H, W) ids at the camera's size; ``labels``: id ->
+    pixels' rays are cast onto the walls; the quad is the bounding rectangle, in the wall most
+    of them hit, of their hit points. ``segments``: (H, W) ids at the camera's size; ``labels``: id ->
     (class, name). Lamps are objects the object stage places, so they are returned as
     {"segment", "name"} marks only."""
-    face, depth = cast_box(box, camera)
-    directions = pixel_directions(camera)
+    rays = pixel_directions(camera)
     walls = wall_quads(box)
     quads, lamps = [], []
     for sid, (cls, name) in sorted(labels.items()):
@@ -235,14 +259,15 @@ def window_lights(box: RoomBox, camera: Camera, segments: np.ndarray, labels: di
             continue
         if cls != "window":
             continue
-        hit = (segments == sid) & (depth > 0)
-        if not hit.any():
+        directions = rays[segments == sid]
+        # The wall the window is on: the one most of its pixels' rays hit (a window's pixels
+        # straddling a corner keep to the wall of their majority).
+        hits = [_wall_hits(wall, camera.center, directions) for wall in walls]
+        best = int(np.argmax([len(h[0]) for h in hits]))
+        (pu, pv), wall = hits[best], walls[best]
+        if len(pu) == 0:
             continue
-        points = camera.center + directions[hit] * depth[hit][:, None]
-        # The wall the window is on: the one whose plane the points are nearest to, by median.
-        wall = min(walls, key=lambda w: np.median(np.abs((points - w.center) @ w.normal)))
         u, v = wall.e1 / np.linalg.norm(wall.e1), wall.e2 / np.linalg.norm(wall.e2)
-        pu, pv = (points - wall.center) @ u, (points - wall.center) @ v
         lo, hi = np.array([pu.min(), pv.min()]), np.array([pu.max(), pv.max()])
         mid = (lo + hi) / 2
         center = wall.center + u * mid[0] + v * mid[1]
@@ -263,7 +288,7 @@ class LightSet:
 
 
 def initial_lights(
-    box: RoomBox,
+    box,
     camera: Camera,
     settings: LightSettings | None = None,
     segments: np.ndarray | None = None,
