@@ -64,10 +64,11 @@ def _sampled_visible(quad, camera, n=40):
     return bool(np.any((uv[:, 0] >= 0) & (uv[:, 0] <= camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] <= camera.height)))
 
 
-@pytest.mark.parametrize("z", [2.5, 1.0, 0.0, -1.0])
-def test_frustum_test_agrees_with_projected_samples(z):
+@pytest.mark.parametrize("z, yaw", [(2.5, 0.0), (1.0, 0.0), (0.0, 0.0), (-1.0, 0.0), (1.0, 30.0), (0.0, -70.0)])
+def test_frustum_test_agrees_with_projected_samples(z, yaw):
     camera = camera_at(z)
-    for quad in ceiling_grid(BOX, cell=0.15) + wall_quads(BOX):
+    box = RoomBox(BOX.center, BOX.size, yaw)
+    for quad in ceiling_grid(box, cell=0.15) + wall_quads(box):
         assert in_frustum(quad, camera) == _sampled_visible(quad, camera), quad.name
 
 
