@@ -21,7 +21,7 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 # run show); duplicates_crop, one job per instance, joins once it has.
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
-RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box"}
+RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box", "room_lights"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
 RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy"}

@@ -155,6 +155,22 @@ def cmd_room_box(args):
     )
 
 
+def cmd_room_lights(args):
+    from .room_lights import stage
+    from .room_lights.lights import LightSettings
+
+    stage.run(
+        args.capture,
+        args.room,
+        args.out,
+        settings=LightSettings(cell=args.cell),
+        spp=args.spp,
+        max_width=args.max_width,
+        seed=args.seed,
+        files={name: getattr(args, name) for name in ("photo", "ids", "labels") if getattr(args, name)},
+    )
+
+
 def cmd_gradients(args):
     from .gradients import stage
 
@@ -543,6 +559,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="coarse fit setting (CoarseSettings in room_box/coarse.py)",
     )
     p.set_defaults(func=cmd_room_box)
+
+    p = stages.add_parser(
+        "room-lights", help="the room's initial area lights and their radiance -> lights.json, figure"
+    )
+    p.add_argument("capture", help="room capture directory (photo, panoptic.png/json)")
+    p.add_argument("--room", required=True, help="the room_box stage's output directory (room.json)")
+    p.add_argument("--out", required=True, help="directory to write (lights.json, room_lights.png)")
+    for name, what in (("photo", "photograph"), ("ids", "segment id PNG"), ("labels", "label table")):
+        p.add_argument(f"--{name}", help=f"the {what}, relative to the capture (default: its standard name)")
+    p.add_argument("--cell", type=float, default=0.25, help="ceiling grid cell, a fraction of the box's larger side")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel of the unit-radiance render")
+    p.add_argument("--max-width", type=int, default=96, help="width of the unit-radiance render, at most")
+    p.add_argument("--seed", type=int, default=0, help="render seed")
+    p.set_defaults(func=cmd_room_lights)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")

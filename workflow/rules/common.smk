@@ -629,7 +629,7 @@ def scene_targets(scene):
             f"{results}/milo/weights.pt",
         ]
     if has_room_inputs(scene):
-        targets.append(f"{results}/room_box")
+        targets += [f"{results}/room_box", f"{results}/room_lights"]
     if mode(scene) == "duplicates" and has_cameras(scene):
         targets += [
             f"{results}/segmentation",
@@ -1164,3 +1164,12 @@ def room_box_options(wildcards):
         elif "focal_length" in capture:
             options.append(f"--focal-length {capture['focal_length']}")
     return " ".join(options)
+
+
+def room_lights_options(wildcards):
+    """The capture's photo and segmentation files where the config names them (room_box's)."""
+    return " ".join(
+        f"--{key} {shlex.quote(value)}"
+        for key, value in room_box_capture_files(wildcards).items()
+        if key != "depth"
+    )
