@@ -24,7 +24,7 @@ RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", 
 RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box", "room_lights"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
-RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy"}
+RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy", "room_lights"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -60,8 +60,8 @@ def test_python_follows_ruff(command):
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     # the demo's recovery sweep is the schema's quick one: 4 MILO runs and 3 of the material stage;
-    # its third scene, the living room photo, is synthesized and gets its room box
-    expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1}
+    # its third scene, the living room photo, is synthesized and gets its room box and lights
+    expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1, "room_lights": 1}
     expected["synthesize"] = FULL_RUN_JOBS["synthesize"] + 1
     assert job_counts(result.stdout) == expected
 

@@ -168,6 +168,7 @@ def cmd_room_lights(args):
         max_width=args.max_width,
         seed=args.seed,
         files={name: getattr(args, name) for name in ("photo", "ids", "labels") if getattr(args, name)},
+        device=args.device,
     )
 
 
@@ -572,6 +573,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of the unit-radiance render")
     p.add_argument("--max-width", type=int, default=96, help="width of the unit-radiance render, at most")
     p.add_argument("--seed", type=int, default=0, help="render seed")
+    p.add_argument("--device", help="OpenCL device for the unit-radiance render (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_room_lights)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")

@@ -24,8 +24,11 @@ rule room_lights:
     resources:
         mem_mb=2000,
         runtime=10,
+        gpu=gpu_request,
     params:
         capture=capture_dir,
         options=room_lights_options,
+        device=device_option,
     shell:
-        "invrender --log {log} room-lights {params.capture:q} --room {input.room:q} --out {output} {params.options}"
+        "invrender --log {log} room-lights {params.capture:q} --room {input.room:q} --out {output}"
+        " {params.options} {params.device}"
