@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.cameras import pixel_directions
+from ..scene.room_photo import yaw_matrix
 from ..scene.types import Camera
 
 __all__ = [
@@ -79,8 +80,7 @@ class OrientedBox:
 
 
 def rotation_y(yaw_rad: float) -> np.ndarray:
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return yaw_matrix(np.degrees(yaw_rad))
 
 
 UNIT_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])

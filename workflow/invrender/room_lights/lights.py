@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..scene.cameras import pixel_directions
+from ..scene.room_photo import yaw_matrix
 from ..scene.types import Camera
 
 __all__ = [
@@ -81,9 +82,8 @@ class LightSettings:
 
 
 def _frame(box) -> np.ndarray:
-    """The box's rotation R_y(yaw): its local axes as columns (room_box/box.py's rotation_y)."""
-    c, s = np.cos(np.radians(box.yaw_deg)), np.sin(np.radians(box.yaw_deg))
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    """The box's rotation R_y(yaw): its local axes as columns."""
+    return yaw_matrix(box.yaw_deg)
 
 
 def _size(box) -> np.ndarray:

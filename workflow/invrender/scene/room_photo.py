@@ -34,6 +34,7 @@ from .types import SceneError
 
 __all__ = [
     "ROOM_CLASSES",
+    "yaw_matrix",
     "RoomPhoto",
     "load_room_photo",
     "write_room_photo",
@@ -45,6 +46,15 @@ __all__ = [
     "LABELS_NAME",
     "CAMERA_NAME",
 ]
+
+
+def yaw_matrix(yaw_deg: float) -> np.ndarray:
+    """Rotation about the room's +Y (up) by ``yaw_deg``, counter-clockwise seen from above: the one
+    convention of every room box, object and light (room.json's ``yaw_deg``)."""
+    a = np.radians(yaw_deg)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
 
 ROOM_CLASSES = ("wall", "floor", "ceiling", "window", "lamp", "object")
 

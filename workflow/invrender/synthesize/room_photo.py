@@ -30,7 +30,7 @@ import numpy as np
 from ..assets.library import library
 from ..assets.primitives import Primitive, concatenate
 from ..scene.atlas import rasterize_atlas, unwrap
-from ..scene.room_photo import fov_y_to_x
+from ..scene.room_photo import fov_y_to_x, yaw_matrix
 from ..scene.types import Maps, Mesh, Scene
 from .room import (
     ENVIRONMENT_DEFAULTS,
@@ -158,13 +158,6 @@ def resolve_config(config: dict | None = None) -> dict:
         raise ValueError(f"config.layout: expected one of {sorted(ROOM_PHOTO_LAYOUTS)}, got {layout!r}")
     base = merge_config(ROOM_PHOTO_DEFAULTS, ROOM_PHOTO_LAYOUTS[layout])
     return merge_config(base, config)
-
-
-def yaw_matrix(yaw_deg: float) -> np.ndarray:
-    """Rotation about +Y by ``yaw_deg`` (counter-clockwise seen from above)."""
-    a = np.radians(yaw_deg)
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 # ---------------------------------------------------------------------------- furniture
