@@ -41,3 +41,23 @@ def test_summary_tables_have_a_row_per_record_and_metric(tmp_path):
     assert text.count("<tr><td>") == 7 and "26.49" in text
     assert (tmp_path / "summary" / "runtime.html").read_text().count("<tr><td>") == 2
     assert read_image(tmp_path / "summary" / "runtime.png").shape[1] > 300
+
+
+def test_duplicates_metrics_sit_beside_the_paper_row_of_their_own_copy_count(tmp_path):
+    # the paper's Table 2, written out here (not imported): rotation in degrees per copy count
+    table = {"6": {"rotation_deg": 2.515}, "10": {"rotation_deg": 0.186}, "20": {"rotation_deg": 0.299}}
+    rows_for = {}
+    for copies in (5, 6, 9, 12, 20, 30):
+        metrics = {
+            "mode": "duplicates",
+            "paper": {"table2_color_box": {k: {**v, "translation": 0.0, "chamfer": 0.0} for k, v in table.items()}},
+            "masks": {"mean_iou": 0.9, "instances": [{"iou": 0.9}] * copies},
+            "poses": {"after": {"rotation": {"error_deg": {"mean": 1.0}}}},
+        }
+        path = tmp_path / f"{copies}.json"
+        path.write_text(json.dumps(metrics))
+        row = {r["metric"]: r for r in summary.metric_rows(path)}["rotation error, mean [deg]"]
+        rows_for[copies] = (row["paper"], row["where in the paper"])
+    assert rows_for[5] == rows_for[6] == (2.515, "SfD Table 2 (6 copies)")
+    assert rows_for[9] == rows_for[12] == (0.186, "SfD Table 2 (10 copies)")
+    assert rows_for[20] == rows_for[30] == (0.299, "SfD Table 2 (20 copies)")
