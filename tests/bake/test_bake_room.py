@@ -117,3 +117,23 @@ def test_missing_or_bad_inputs_are_one_scene_error(tmp_path):
     with pytest.raises(SceneError, match="atlas"):
         room.run(dirs["room_box"], tmp_path / "scene", materials_dir=dirs["room_materials"])
     assert not (tmp_path / "scene").exists()
+
+
+def test_the_room_scene_exports_to_usd_with_its_objects_and_camera(tmp_path):
+    from pxr import Usd, UsdGeom, UsdLux
+
+    from invrender.export import stage as export
+
+    dirs = _stage_dirs(tmp_path)
+    room.run(dirs["room_box"], tmp_path / "scene", dirs["room_lights"], dirs["room_objects"], texels_per_meter=8)
+    export.run(tmp_path / "scene", tmp_path / "export")
+    stage = Usd.Stage.Open(str(tmp_path / "export" / "scene.usda"))
+    prims = list(stage.Traverse())
+    objects = {p.GetParent().GetName() for p in prims if p.IsA(UsdGeom.Mesh)}
+    assert {"wall_mx", "wall_px", "wall_mz", "wall_pz", "floor", "ceiling", "chair"} <= objects
+    (camera,) = [p for p in prims if p.IsA(UsdGeom.Camera)]
+    assert camera.GetName() == "photo"
+    # the camera sits where room.json puts it: centre -R^T t = (0, 1.2, -1)
+    world = UsdGeom.Xformable(camera).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    assert np.allclose(list(world.ExtractTranslation()), [0.0, 1.2, -1.0], atol=1e-5)
+    assert any(p.HasAPI(UsdLux.MeshLightAPI) or p.IsA(UsdLux.RectLight) for p in prims)
