@@ -304,6 +304,27 @@ def cmd_evaluate(args):
     from .evaluate import stage
     from .scene.types import SceneError
 
+    if args.room:  # a room scene: the photo re-rendered, masks, box, objects, light, material
+        from .evaluate import room
+
+        for flag, value in (("--scene", args.scene), ("--capture", args.capture)):
+            if not value:
+                raise SceneError("evaluate --room", flag, "the room scene directory and its capture")
+        room.run(
+            args.scene,
+            args.capture,
+            args.room,
+            args.out,
+            objects_dir=args.objects,
+            lights_dir=args.lights,
+            truth_dir=args.truth,
+            spp=args.spp,
+            seed=args.seed,
+            device=args.device,
+        )
+        return
+    if not args.images:
+        raise SceneError("evaluate", "--images", "the captured images (or --room for a room scene)")
     if args.duplicates:  # a duplicates scene: masks, poses and the shared mesh
         if not args.segmentation:
             raise SceneError("evaluate", "--segmentation", "the segment stage's folder beside --duplicates")
@@ -728,7 +749,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--atlas", help="the recovered atlas' atlas.npz (geometry stage; multiview)")
     p.add_argument("--duplicates", help="a duplicates scene's duplicates/ folder (poses.json, object.ply)")
     p.add_argument("--segmentation", help="with --duplicates: the segment stage's folder (masks/, instances.json)")
-    p.add_argument("--images", required=True, help="the captured images, named as the cameras' images")
+    p.add_argument("--images", help="the captured images, named as the cameras' images (not with --room)")
+    p.add_argument("--room", help="a room scene's room_box/ folder (room.json): --scene is the room scene")
+    p.add_argument("--capture", help="with --room: the room capture (photo, panoptic segmentation)")
+    p.add_argument("--objects", help="with --room: the room_objects folder (its metrics), if there")
+    p.add_argument("--lights", help="with --room: the room_lights folder (its radiance fit), if there")
     p.add_argument("--out", required=True, help="directory to write (metrics.json, figures)")
     p.add_argument(
         "--holdout", nargs="+", action="extend", metavar="CAMERA", help="camera names held back from training"

@@ -640,6 +640,8 @@ def scene_targets(scene):
         ]
         if SCENES[scene]["edits"]:
             targets.append(f"{results}/edits")
+        if is_synthetic(scene):
+            targets.append(f"{results}/report")
     if mode(scene) == "duplicates" and has_cameras(scene):
         targets += [
             f"{results}/segmentation",
@@ -1228,3 +1230,27 @@ def bake_room_options(wildcards):
     options.append(room_lights_options(wildcards))
     options.append(f"--texels-per-meter {config['bake_room']['texels_per_meter']}")
     return " ".join(option for option in options if option)
+
+
+def room_evaluate_inputs(wildcards):
+    """The room scene, the synthetic capture (its truth/), room_box and the stages present."""
+    results = f"results/{wildcards.scene}"
+    inputs = {
+        "scene": f"{results}/scene",
+        "capture": f"{results}/capture",
+        "room": f"{results}/room_box",
+    }
+    for stage in room_stages_present():
+        if stage != "room_materials":
+            inputs[ROOM_SCENE_STAGES[stage]] = f"{results}/{stage}"
+    return inputs
+
+
+def room_evaluate_options(wildcards):
+    """--lights and --objects for the stages present (their fit and metrics)."""
+    results = f"results/{wildcards.scene}"
+    return " ".join(
+        f"--{ROOM_SCENE_STAGES[stage]} {results}/{stage}"
+        for stage in room_stages_present()
+        if stage != "room_materials"
+    )

@@ -87,3 +87,43 @@ rule evaluate_duplicates:
         " --segmentation {input.segmentation} --truth {input.capture}/ground_truth"
         " --images {input.capture}/images --scene {input.scene} --training {params.training}"
         " --out {output} --seed {params.seed} --spp {params.spp} {params.device}"
+
+
+rule evaluate_room:
+    """A room scene against the synthetic truth of its photo: the photo re-rendered (PSNR, SSIM),
+    mask IoU per class, the room box's corner error, the objects' errors (room_objects' metrics,
+    when that stage is there), the lights' total power and the material on the surface
+    (workflow/invrender/evaluate/room.py)."""
+    input:
+        unpack(room_evaluate_inputs),
+    output:
+        report(
+            directory("results/{scene}/report"),
+            patterns=["{figure}.png"],
+            caption="../report/report_room.rst",
+            category="Evaluation",
+            subcategory="{scene}",
+            labels={"scene": "{scene}", "figure": "{figure}"},
+        ),
+    log:
+        "results/{scene}/logs/evaluate.log",
+    benchmark:
+        "results/{scene}/benchmarks/evaluate_room.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern([name for name in ROOM if name in SYNTHETIC]),
+    conda:
+        "../../envs/render.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=60,
+        gpu=gpu_request,
+    params:
+        options=room_evaluate_options,
+        spp=config["evaluate"]["spp"],
+        seed=config["evaluate"]["seed"],
+        device=device_option,
+    shell:
+        "invrender --log {log} evaluate --room {input.room:q} --scene {input.scene}"
+        " --capture {input.capture} --truth {input.capture}/truth --out {output}"
+        " {params.options} --spp {params.spp} --seed {params.seed} {params.device}"

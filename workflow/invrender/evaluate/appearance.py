@@ -59,7 +59,7 @@ from ..scene.types import Atlas, Camera, Mesh, Scene, SceneError
 from . import figures, relight
 from .correspond import correspond
 from .duplicates import poses_by_id, surface_centroid
-from .maps import kg_mse, kg_on_common_cube, truth_in_recovered_layout
+from .maps import ball_subset, kg_mse, kg_on_common_cube, truth_in_recovered_layout
 from .metrics import mse, psnr, tone_map
 
 __all__ = [
@@ -283,13 +283,21 @@ def roughness_errors(recovered_ka, truth_ka) -> dict:
     return {"mse": mse(r, t), "mse_gamma": mse(display(r), display(t))}
 
 
-def aligned_correspondence(mesh: Mesh, shape, similarity: Similarity, truth_mesh: Mesh, truth_shape):
+def aligned_correspondence(
+    mesh: Mesh, shape, similarity: Similarity, truth_mesh: Mesh, truth_shape, max_texels: int | None = None
+):
     """The true texel at each covered texel of ``mesh``'s atlas (of ``shape``) once the mesh is
-    moved by ``similarity`` into the truth's frame (``correspond.py``)."""
+    moved by ``similarity`` into the truth's frame (``correspond.py``); with ``max_texels``, at
+    most that many of them at an even stride (a room's atlas holds half a million)."""
     moved = similarity.mesh(mesh)
     texels = rasterize_atlas(moved, *shape)
     if not texels.mask.any():
         raise SceneError("evaluate appearance", "atlas", "a recovered mesh whose UVs cover some texels")
+    if max_texels is not None:
+        covered = np.flatnonzero(texels.mask)
+        mask = np.zeros(texels.mask.size, bool)
+        mask[covered[ball_subset(len(covered), max_texels)]] = True
+        texels = replace(texels, mask=mask.reshape(texels.mask.shape))
     # The points again in float64 from their barycentrics (summing to 1, so a point on an edge is
     # on it to the last bit): correspond's nudge off shared edges
     # finds a point on its triangle within a millionth of the sample spacing (6e-10 m on a 10 cm
