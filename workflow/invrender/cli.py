@@ -854,7 +854,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--work", help="where the chain's stages write, kept to resume (default results/bench/milo, .../duplicates)"
     )
     dup = p.add_argument_group("bench duplicates")
-    dup.add_argument("--scenes", help="comma-separated duplicates presets (default the -hd boxes and cans)")
+    dup.add_argument(
+        "--scenes", help="comma-separated duplicates presets (default the -hd boxes and cans); bench room: layouts"
+    )
     dup.add_argument("--variants", help="comma-separated: default, no-rotation-search, sift (default all on box-10-hd)")
     dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
     render = p.add_argument_group("bench render")

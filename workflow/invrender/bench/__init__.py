@@ -21,6 +21,9 @@
 - ``duplicates-material``: the shared material and sky of the duplicates fixtures, with true and
   recovered poses, beside the paper's Tables 1 and 2 (``duplicates_material.py``; docs/benchmarks.md).
 
+- ``room``: the room mode (PSDR-Room) on the three synthetic layouts through the room stages,
+  one table per item of issue 16's Accept list (``room.py``; docs/benchmarks.md, "Room").
+
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
 subprocess of the BVH measurement) does not find its module already imported.
@@ -41,6 +44,7 @@ BENCHMARKS = (
     "duplicates",
     "duplicates-material",
     "accuracy",
+    "room",
 )
 OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
@@ -48,6 +52,7 @@ OPTIONS = {
     "duplicates": ("scenes", "variants", "work"),
     "duplicates-material": ("scenes", "poses", "work"),
     "accuracy": ("work",),
+    "room": ("scenes", "work"),
 }  # what only some take
 
 
