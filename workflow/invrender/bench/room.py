@@ -246,8 +246,9 @@ def table_row(row: dict) -> dict:
     for key, keys in OBJECT_KEYS.items():
         out[key] = _object_metric(objects, keys) if row["row"] == "stages" else None
     steps = row.get("steps") or {}
-    for step in STEPS:
-        out[f"{step}_s"] = "missing" if _get(steps, step, "missing") else _get(steps, step, "wall_s")
+    for step in STEPS:  # text: a number, or 'missing' (the stage is not in this tree)
+        wall = _get(steps, step, "wall_s")
+        out[f"{step}_s"] = "missing" if _get(steps, step, "missing") else None if wall is None else f"{wall:.1f}"
     peaks = [s["peak_rss_mb"] for s in steps.values() if isinstance(s, dict) and s.get("peak_rss_mb") is not None]
     out["peak_rss_mb"] = max(peaks) if peaks else None
     return out
@@ -273,7 +274,7 @@ OBJECT_COLUMNS = [
     ("position_error_m", "position error [m]", ".3f"),
     ("rotation_error_deg", "rotation error [deg]", ".1f"),
     ("scale_error", "scale error", ".3f"),
-    ("room_objects_s", "room_objects [s]", ".0f"),
+    ("room_objects_s", "room_objects [s]", "s"),
 ]
 MASK_COLUMNS = [
     ("scene", "layout", "s"),
@@ -294,7 +295,7 @@ PHOTO_COLUMNS = [
     ("kd_mse", "kd MSE", ".4f"),
 ]
 TIME_COLUMNS = [("scene", "layout", "s"), ("row", "objects", "s")]
-TIME_COLUMNS += [(f"{s}_s", f"{s} [s]", ".1f") for s in STEPS] + [("peak_rss_mb", "peak RSS [MB]", ".0f")]
+TIME_COLUMNS += [(f"{s}_s", f"{s} [s]", "s") for s in STEPS] + [("peak_rss_mb", "peak RSS [MB]", ".0f")]
 
 
 def write_markdown(out: Path, report: dict) -> str:
