@@ -94,6 +94,10 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
         "cameras": 3,
         "room_box": 1,
         "room_lights": 1,
+        "bake_room": 1,  # living's room scene, with features, render and export on it
+        "features": 3,
+        "render": 3,
+        "export": 3,
         "all": 1,
     }
     assert "room-box living --out results/living/room_box" in result.stdout
@@ -107,7 +111,9 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
     assert "scene 'tins' (duplicates, a capture of your own): builds nothing yet" in result.stdout
     assert "the evaluation of the recovered material and light (issue 14)" in result.stdout
     assert "scene 'living' (room, a capture of your own): builds results/living/cameras, " in result.stdout
-    assert "(issue 16) build results/living/scene/" in result.stdout
+    assert "the object and material stages (issue 16), which bake_room takes into results/living/scene/" in (
+        result.stdout
+    )
     assert not (tmp_path / "results").exists()
 
 
@@ -217,7 +223,8 @@ def test_a_synthetic_room_photo_is_a_room_scene_made_by_synthesize(tmp_path):
     """Kind room_photo (the fixture tests/workflow/room_photo.yaml) gives mode room: its capture
     is built by synthesize (no cameras rule: its field of view is in camera.json), then its box."""
     result = snakemake(tmp_path, "-n", "-p", config=TEST_CONFIG.with_name("room_photo.yaml"))
-    assert job_counts(result.stdout) == {"synthesize": 1, "room_box": 1, "room_lights": 1, "all": 1}
+    room_scene = {"bake_room": 1, "features": 1, "render": 1, "export": 1, "evaluate_room": 1}
+    assert job_counts(result.stdout) == {"synthesize": 1, "room_box": 1, "room_lights": 1, **room_scene, "all": 1}
     assert "room-box results/living/capture --out results/living/room_box" in result.stdout
     assert "synthesize room_photo --out results/living/capture" in result.stdout
     refused = dry_run(tmp_path, {"living": {"mode": "multiview", "synthetic": {"kind": "room_photo"}}}, check=False)
