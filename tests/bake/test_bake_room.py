@@ -137,3 +137,16 @@ def test_the_room_scene_exports_to_usd_with_its_objects_and_camera(tmp_path):
     world = UsdGeom.Xformable(camera).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
     assert np.allclose(list(world.ExtractTranslation()), [0.0, 1.2, -1.0], atol=1e-5)
     assert any(p.HasAPI(UsdLux.MeshLightAPI) or p.IsA(UsdLux.RectLight) for p in prims)
+
+
+def test_the_cli_bakes_a_room(tmp_path, capsys):
+    from invrender.cli import main
+
+    dirs = _stage_dirs(tmp_path)
+    args = ["bake", "--room", dirs["room_box"], "--lights", dirs["room_lights"], "--objects", dirs["room_objects"]]
+    args += ["--materials", dirs["room_materials"], "--texels-per-meter", "8", "--out", tmp_path / "scene"]
+    assert main([str(a) for a in args]) == 0
+    assert [o.name for o in load_scene(tmp_path / "scene").objects][-2:] == ["chair", "light_ceiling_0_0"]
+    capsys.readouterr()
+    assert main(["bake", "--maps", "maps.npz", "--cameras", "c", "--out", str(tmp_path / "other")]) != 0
+    assert "bake: --geometry is required with --maps or --poses" in capsys.readouterr().err
