@@ -101,6 +101,18 @@ def test_the_room_stages_become_one_scene(tmp_path):
     )
 
 
+def test_the_material_stages_refitted_lights_win(tmp_path):
+    dirs = _stage_dirs(tmp_path)
+    refitted = {**LIGHTS, "lights": [{**LIGHTS["lights"][0], "radiance": [4.0, 3.0, 2.0]}]}
+    (dirs["room_materials"] / "lights.json").write_text(json.dumps(refitted))
+    meta = room.run(
+        dirs["room_box"], tmp_path / "scene", dirs["room_lights"], None, dirs["room_materials"], texels_per_meter=8
+    )
+    sets = load_scene(tmp_path / "scene").packing.unpack_atlas(load_scene(tmp_path / "scene").maps)
+    assert np.allclose(sets["light_ceiling_0_0"].ke, [4.0, 3.0, 2.0])
+    assert meta["lights"] == str(dirs["room_materials"] / "lights.json")
+
+
 def test_the_room_box_alone_is_an_empty_grey_room(tmp_path):
     dirs = _stage_dirs(tmp_path)
     room.run(dirs["room_box"], tmp_path / "scene", texels_per_meter=8)

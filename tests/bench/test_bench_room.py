@@ -46,14 +46,14 @@ def test_tables_show_missing_stages_and_each_accept_item(tmp_path):
         "photo": {"psnr_db": 15.0, "ssim": 0.4},
         "lights": {"power_ratio": 1.5, "power_w": {"truth": {"mean": 30.0}}, "fit": {"radiance_scale": 1.2}},
         "material": {"albedo": {"psnr_db": 14.0}, "roughness": {"mse": 0.01}, "map_mse": {"kd": 0.05}},
-        "objects": {"retrieval_accuracy": 0.5, "position_error_m": {"coarse": 0.3, "refined": 0.1}},
+        "objects": {"coarse": {"asset_accuracy": 0.5, "position_error": 0.3}, "refined": {"position_error": 0.1}},
     }
     box = {"coarse": {"corner_error": 0.3, "mask_iou": {"wall": 0.9}}, "refined": {"corner_error": 0.1}}
     steps = {"room_box": {"wall_s": 30.0, "peak_rss_mb": 400.0}, "room_objects": {"missing": True}}
     row = {"scene": "living", "row": "stages", "metrics": metrics, "room_box": box, "steps": steps}
     line = bench.table_row(row)
     assert line["room_objects_s"] == "missing" and line["room_box_s"] == "30.0" and line["peak_rss_mb"] == 400.0
-    assert line["retrieval_accuracy"] == 0.5 and line["position_error_m"] == 0.1 and line["iou_floor"] == 0.8
+    assert line["asset_accuracy_coarse"] == 0.5 and line["position_error_refined"] == 0.1 and line["iou_floor"] == 0.8
     report = {"table": [line], "settings": {"width": 1024, "height": 768, "capture_spp": 16, "evaluate_spp": 16},
               "mode": "full", "seconds": 10.0, "machine": {}, "notes": []}  # fmt: skip
     text = bench.write_markdown(tmp_path, report)

@@ -2,7 +2,8 @@
 scene/room_scene.assemble_room and written as a version-2 scene seen by the photo's camera.
 
     room_box/room.json              the box and the photo's camera (required)
-    room_lights/lights.json         the area lights, the lamps (optional: no lights without it)
+    room_lights/lights.json         the area lights, the lamps (optional: no lights without it;
+                                    room_materials/lights.json, its refitted radiances, wins)
     room_objects/objects.json       {"objects": [{name, asset, segment, T_obj2world, ...}],
                                      "asset_dirs": [...]} (optional: an empty room without it)
     room_materials/materials.json   {"materials": {name: constants | {"atlas": "file.npz"}},
@@ -81,12 +82,23 @@ def run(
     check_output(out_dir, "scene")
     room_json = Path(room_dir) / "room.json"
     room = read_json(room_json, "the room_box stage's room.json")
+    # room_materials refits the lights' radiances with the materials (Eq. 4) and writes them
+    # beside its materials.json: those, when there, are the scene's lights
+    fitted = Path(materials_dir) / "lights.json" if materials_dir is not None else None
+    if fitted is not None and fitted.is_file():
+        lights_dir = fitted.parent
     lights = read_json(Path(lights_dir) / "lights.json", "the room_lights stage's lights.json") if lights_dir else {}
     objects, dirs = [], list(asset_dirs)
     if objects_dir is not None:
         doc = read_json(Path(objects_dir) / "objects.json", "the room_objects stage's objects.json")
         objects = doc["objects"] if isinstance(doc, dict) else doc
-        dirs += [d for d in (doc.get("asset_dirs", []) if isinstance(doc, dict) else []) if d not in dirs]
+        # user model folders the object stage retrieved from (top level, or its settings)
+        listed = (
+            (doc.get("asset_dirs") or (doc.get("settings") or {}).get("asset_dirs") or [])
+            if isinstance(doc, dict)
+            else []
+        )
+        dirs += [d for d in listed if d not in dirs]
     materials, kg = read_materials(materials_dir) if materials_dir is not None else ({}, None)
     labels = None
     if capture_dir is not None:

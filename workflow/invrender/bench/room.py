@@ -105,9 +105,9 @@ def truth_objects(capture: Path, room_dir: Path, out: Path) -> None:
     (out / "objects.json").write_text(json.dumps({"objects": objects, "source": "truth"}, indent=1) + "\n")
 
 
-def _optional(name: str, ledger: Ledger, output: Path, *args):
-    """An issue-16 stage written beside this benchmark: its stage.run(capture, room_dir, out_dir)
-    if the package is there; None (reported "missing") if not, or if it stopped (its error kept
+def _optional(name: str, ledger: Ledger, output: Path, *args, **kwargs):
+    """An issue-16 stage written beside this benchmark: its stage.run(capture, room_dir, out_dir,
+    **kwargs) if the package is there; None (reported "missing") if not, or if it stopped (its error kept
     in steps.json: the rows go on without it). Written before that stage landed: its call is
     this benchmark's guess at the stage's entry point, to be checked when it is merged."""
     if not stage_present(name):
@@ -115,7 +115,7 @@ def _optional(name: str, ledger: Ledger, output: Path, *args):
         return None
     try:
         stage = importlib.import_module(f"invrender.{name}.stage")
-        ledger.run(name, output, stage.run, *args)
+        ledger.run(name, output, stage.run, *args, **kwargs)
     except (Stopped, TypeError, ValueError) as error:
         log.error("bench room: %s stopped: %s", name, error)
         ledger.steps[name] = {**(ledger.steps.get(name) or {}), "error": str(error)}
@@ -136,7 +136,10 @@ def layout_steps(layout: str, settings: Settings, ledger: Ledger) -> dict:
     objects = _optional("room_objects", ledger, folder / "room_objects", capture, room, folder / "room_objects")
     lights = folder / "room_lights"
     ledger.run("room_lights", lights, room_lights.run, capture, room, lights)
-    materials = _optional("room_materials", ledger, folder / "room_materials", capture, room, folder / "room_materials")
+    materials = _optional(
+        "room_materials", ledger, folder / "room_materials", capture, room, folder / "room_materials",
+        objects_dir=objects, lights_dir=lights,
+    )  # fmt: skip
     return {"capture": capture, "room": room, "objects": objects, "lights": lights, "materials": materials}
 
 
@@ -203,25 +206,8 @@ def _get(document, *path):
 
 
 STEPS = ("capture", "room_box", "room_objects", "room_lights", "room_materials", "bake", "evaluate", "export")
-OBJECT_KEYS = {  # room_objects' metrics, as far as this benchmark knows them: the keys it looks for
-    "retrieval_accuracy": ("retrieval_accuracy", "retrieval", "accuracy"),
-    "position_error_m": ("position_error_m", "position_error"),
-    "rotation_error_deg": ("rotation_error_deg", "rotation_error"),
-    "scale_error": ("scale_error_relative", "scale_error"),
-}
-
-
-def _object_metric(metrics, keys):
-    """The first of ``keys`` in room_objects' metrics (its refined value when it has coarse and
-    refined, its mean when a summary), else None."""
-    for key in keys:
-        value = _get(metrics, key)
-        if isinstance(value, dict):
-            value = value.get("refined", value.get("mean"))
-            value = value.get("mean") if isinstance(value, dict) else value
-        if isinstance(value, (int, float)):
-            return float(value)
-    return None
+# room_objects' metrics (objects.json "metrics": "coarse" and "refined", each with these means)
+OBJECT_KEYS = ("asset_accuracy", "category_accuracy", "position_error", "yaw_error_deg", "scale_error")
 
 
 def table_row(row: dict) -> dict:
@@ -242,9 +228,10 @@ def table_row(row: dict) -> dict:
     out["albedo_psnr_db"] = _get(m, "material", "albedo", "psnr_db")
     out["roughness_mse"] = _get(m, "material", "roughness", "mse")
     out["kd_mse"] = _get(m, "material", "map_mse", "kd")
-    objects = _get(m, "objects")
-    for key, keys in OBJECT_KEYS.items():
-        out[key] = _object_metric(objects, keys) if row["row"] == "stages" else None
+    objects = _get(m, "objects") if row["row"] == "stages" else None
+    for key in OBJECT_KEYS:
+        for stage in ("coarse", "refined"):
+            out[f"{key}_{stage}"] = _get(objects, stage, key)
     steps = row.get("steps") or {}
     for step in STEPS:  # text: a number, or 'missing' (the stage is not in this tree)
         wall = _get(steps, step, "wall_s")
@@ -270,10 +257,15 @@ BOX_COLUMNS = [
 ]
 OBJECT_COLUMNS = [
     ("scene", "layout", "s"),
-    ("retrieval_accuracy", "retrieval accuracy", ".2f"),
-    ("position_error_m", "position error [m]", ".3f"),
-    ("rotation_error_deg", "rotation error [deg]", ".1f"),
-    ("scale_error", "scale error", ".3f"),
+    ("asset_accuracy_coarse", "retrieval (asset) coarse", ".2f"),
+    ("asset_accuracy_refined", "refined", ".2f"),
+    ("category_accuracy_refined", "category", ".2f"),
+    ("position_error_coarse", "position error coarse [m]", ".3f"),
+    ("position_error_refined", "refined [m]", ".3f"),
+    ("yaw_error_deg_coarse", "yaw error coarse [deg]", ".1f"),
+    ("yaw_error_deg_refined", "refined [deg]", ".1f"),
+    ("scale_error_coarse", "scale error coarse", ".3f"),
+    ("scale_error_refined", "refined", ".3f"),
     ("room_objects_s", "room_objects [s]", "s"),
 ]
 MASK_COLUMNS = [
