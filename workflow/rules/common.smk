@@ -629,7 +629,11 @@ def scene_targets(scene):
             f"{results}/milo/weights.pt",
         ]
     if has_room_inputs(scene):
-        targets += [f"{results}/room_box", f"{results}/room_lights"]
+        targets += [
+            f"{results}/room_box",
+            f"{results}/room_lights",
+            f"{results}/room_objects",
+        ]
     if mode(scene) == "duplicates" and has_cameras(scene):
         targets += [
             f"{results}/segmentation",
@@ -1173,3 +1177,16 @@ def room_lights_options(wildcards):
         for key, value in room_box_capture_files(wildcards).items()
         if key != "depth"
     )
+
+
+def room_objects_options(wildcards):
+    """The capture's named files (room_box's) and the config's room_objects settings as flags."""
+    settings = config["room_objects"]
+    options = [
+        f"--{key} {shlex.quote(value)}"
+        for key, value in room_box_capture_files(wildcards).items()
+    ]
+    for key in ("iterations", "spp", "candidates", "max_width", "seed"):
+        options.append(f"--{key.replace('_', '-')} {settings[key]}")
+    options += [f"--asset-dir {shlex.quote(d)}" for d in settings["asset_dirs"]]
+    return " ".join(options)
