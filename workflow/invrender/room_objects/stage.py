@@ -41,7 +41,7 @@ from .placement import (
     support_order,
     supports,
 )
-from .refine import RefineSettings, block_factor, reduced_camera, reduced_targets, refine
+from .refine import RefineSettings, block_factor, exact_losses, reduced_camera, reduced_targets, refine
 
 __all__ = ["run", "read_room", "Settings"]
 
@@ -218,11 +218,7 @@ def run(
             [{"step": h["step"], "loss": round(h["loss"], 6), "iou": [round(v, 4) for v in h["iou"]]} for h in steps]
         )
         log.info("room_objects: candidates of rank %d refined: losses %s", rank, np.round(losses, 4).tolist())
-    chosen = [int(np.argmin([r[2][i] for r in rounds])) for i in range(len(segments))]
-    final = [rounds[c][1][i] for i, c in enumerate(chosen)]
-    for i, j in enumerate(parents):  # a parent may have changed its asset: stand on its chosen top
-        if j is not None:
-            final[i].position[1] = final[j].top
+    final, exact = _choose(rounds, parents, targets, settings.refine)
     first = rounds[0][0] if rounds else []
 
     metric_camera, metric_masks = _metric_view(photo, segments, camera)
@@ -245,7 +241,7 @@ def run(
         report_metrics["truth_scale"] = room["truth_scale"]
 
     objects = [
-        _object_json(seg, first[i], final[i], [r[2][i] for r in rounds], scale, report_metrics, i)
+        _object_json(seg, first[i], final[i], [r[2][i] for r in rounds], exact[i], scale, report_metrics, i)
         for i, seg in enumerate(segments)
     ]
     report = {
@@ -279,6 +275,27 @@ def run(
     return report
 
 
+def _choose(rounds, parents, targets, settings: RefineSettings) -> tuple[list[Placement], list[list[float]]]:
+    """Each object's candidate of the least exact Eq. 3 loss (refine.exact_losses), its refined
+    placement tried among the others' current choices (the first rank's to begin with), objects in
+    support order; then each child set on its parent's chosen top. Returns the placements and each
+    object's exact loss per candidate."""
+    current = [Placement(p.asset, p.position.copy(), p.yaw_deg, p.scale) for p in rounds[0][1]] if rounds else []
+    exact = []
+    for i in range(len(current)):
+        tried = []
+        for _, refined, _ in rounds:
+            trial = current[:i] + [refined[i]] + current[i + 1 :]
+            tried.append(float(exact_losses(trial, targets, settings)[i]))
+        best = rounds[int(np.argmin(tried))][1][i]
+        current[i] = Placement(best.asset, best.position.copy(), best.yaw_deg, best.scale)
+        exact.append(tried)
+    for i, j in enumerate(parents):  # a parent may have changed its asset: stand on its chosen top
+        if j is not None:
+            current[i].position[1] = current[j].top
+    return current, exact
+
+
 def _metric_view(photo, segments, camera) -> tuple[Camera, list[np.ndarray]]:
     """The camera and the segments' masks at most METRIC_WIDTH wide (a block's majority)."""
     factor = block_factor(photo.width, METRIC_WIDTH)
@@ -301,10 +318,11 @@ def _place_json(place: Placement, scale: float) -> dict:
     }
 
 
-def _object_json(seg: Segment, coarse: Placement, final: Placement, losses, scale, report_metrics, i) -> dict:
+def _object_json(seg: Segment, coarse: Placement, final: Placement, losses, exact, scale, report_metrics, i) -> dict:
     candidates = [
         {"asset": m.name, "category": m.category, "distance": round(m.distance, 6), "loss": round(float(loss), 6)}
-        for m, loss in zip(seg.candidates, losses)
+        | {"exact_loss": round(float(e), 6)}
+        for m, loss, e in zip(seg.candidates, losses, exact)
     ]
     return {
         "segment": seg.id,
