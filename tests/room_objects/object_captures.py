@@ -104,3 +104,39 @@ def write_capture(path, cam=None, objects=True, depth=True):
     scale = float(np.median(depth_map[depth_map > 0]))
     (room / "room.json").write_text(json.dumps({"box": BOX.to_json(), "camera": room_camera, "depth_scale": scale}))
     return path, room
+
+
+def study(runs: dict, work, **settings) -> list[tuple[str, dict]]:
+    """docs/room-objects.md's table: the stage on each (capture, room_box output) of ``runs``; per
+    run a Markdown row (coarse -> refined: asset and category accuracy, position error m, yaw error
+    degrees, scale error, mean mask IoU; seconds) and objects.json's metrics."""
+    import time
+
+    from invrender.room_objects import stage
+
+    rows = []
+    for name, (capture, room) in runs.items():
+        started = time.perf_counter()
+        report = stage.run(capture, room, work / f"{name}_objects", stage.Settings(**settings))
+        seconds = time.perf_counter() - started
+        m = report["metrics"]
+        cells = [name, str(len(report["objects"]))]
+        for key, digits in (
+            ("asset_accuracy", 2),
+            ("category_accuracy", 2),
+            ("position_error", 3),
+            ("yaw_error_deg", 1),
+            ("scale_error", 3),
+            ("mean_mask_iou", 3),
+        ):
+            cells.append(f"{m['coarse'][key]:.{digits}f} -> {m['refined'][key]:.{digits}f}")
+        cells.append(f"{seconds:.0f}")
+        rows.append(("| " + " | ".join(cells) + " |", m))
+    return rows
+
+
+STUDY_HEADER = [
+    "| room | objects | asset top-1 | category top-1 | position error, m | yaw error, deg | scale error | mask IoU "
+    "| s |",
+    "|---|---|---|---|---|---|---|---|---|",
+]
