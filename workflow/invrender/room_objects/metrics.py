@@ -83,18 +83,22 @@ def truth_metrics(
     truth: dict,
     truth_scale: float,
     symmetry: dict[str, int],
+    in_photo: set[int] | None = None,
 ) -> dict:
     """Per truth object (by segment): the estimate's asset and category match, position error (m),
     yaw error (deg), scale error (relative); and their means. ``estimates`` by segment id, in
     normalised units (``units`` times them is room.json's); a truth object without an estimate
-    counts as a miss in the accuracies and is left out of the errors."""
+    counts as a miss in the accuracies and is left out of the errors, unless its segment has no
+    pixel in the photo (not in ``in_photo``, the segment ids the photo shows): then it is listed
+    and left out of everything (the office's shelf, out of view)."""
     R, t = np.asarray(camera.R), np.asarray(camera.t) * units
     up = truth["R"][:, 1]
     rows = {}
     for segment, true in sorted(truth["objects"].items()):
         place = estimates.get(segment)
         if place is None:
-            rows[str(segment)] = {"found": False, "asset": False, "category": False}
+            seen = in_photo is None or segment in in_photo
+            rows[str(segment)] = {"found": False, "in_photo": seen, "asset": False, "category": False}
             continue
         mine = (R @ (place.position * units) + t) * truth_scale
         theirs = truth["R"] @ true["position"] + truth["t"]
@@ -121,7 +125,7 @@ def _rounded(value):
 
 
 def _means(rows: dict) -> dict:
-    values = list(rows.values())
+    values = [r for r in rows.values() if r.get("in_photo", True)]
     found = [r for r in values if r["found"]]
 
     def mean(key, average=np.mean):

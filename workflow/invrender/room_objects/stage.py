@@ -234,10 +234,11 @@ def run(
     truth = measures.read_truth(truth_dir) if truth_dir.exists() else None
     if truth is not None:
         symmetry = {a.name: a.symmetry for a in library}
+        shown = {int(i) for i in np.unique(photo.segments)}
         for which, places in (("coarse", first), ("refined", final)):
             by_segment = {s.id: p for s, p in zip(segments, places)}
             report_metrics[which].update(
-                measures.truth_metrics(by_segment, camera, scale, truth, room["truth_scale"], symmetry)
+                measures.truth_metrics(by_segment, camera, scale, truth, room["truth_scale"], symmetry, shown)
             )
         report_metrics["truth_scale"] = room["truth_scale"]
 
