@@ -94,6 +94,7 @@ class CoarseSettings:
     erosion: int = 1  # pixels taken off each segment before its points are taken (mixed borders)
     scale_steps: int = 13  # ours after the paper's start: scales tried (0 or 1: the paper's alone) ...
     max_growth: float = 8.0  # ... from its scale to this times it
+    yaw_tolerance: float = 0.25  # the retrieval's yaw is kept unless another's mask L1 is less by this fraction
 
 
 def segment_points(mask: np.ndarray, depth: np.ndarray, camera: Camera, erosion: int) -> np.ndarray:
@@ -215,7 +216,15 @@ def _placed(asset, centre, height, yaw, scale, camera, target_depth) -> tuple[Pl
 
 
 def coarse_placement(
-    seg: Segment, asset: Asset, height: float | None, camera: Camera, target, ignore, target_depth, settings
+    seg: Segment,
+    asset: Asset,
+    height: float | None,
+    camera: Camera,
+    target,
+    ignore,
+    target_depth,
+    settings,
+    view_yaw: float | None = None,
 ) -> tuple[Placement, float]:
     """The coarse pose of ``asset`` for ``seg``. The paper's: its bounding-box centre over the points'
     median (x, z), its radius half the points' (``radius_factor``), standing at ``height`` (its
@@ -225,8 +234,11 @@ def coarse_placement(
     which may hide it). Ours after it (docs/room-objects.md: from the paper's start alone the
     refinement did not reach the objects in 40 steps): the scale times each of ``scale_steps``
     (1 to ``max_growth``, geometric) with the object moved back along the line of sight to the
-    segment's median depth, the least mask L1 kept, then the rotations again at that scale.
-    Returns the placement and its L1."""
+    segment's median depth (``target_depth``), the least mask L1 kept; then the rotations again at
+    that scale, where ``view_yaw`` (the retrieval's, from its best view: its depth tells a chair's
+    front from its back, which a silhouette does not) is kept unless another's mask L1 is less by
+    more than ``yaw_tolerance`` of it; the scales again at a new rotation. Returns the placement
+    and its mask L1."""
     centre = seg.centre
     radius = float(np.median(np.linalg.norm(seg.points - centre, axis=1)))
     start = max(settings.radius_factor * radius / mesh_radius(asset), 1e-3)
@@ -235,17 +247,29 @@ def coarse_placement(
     def score(labels) -> float:
         return float(np.abs((labels == 0).astype(np.float64) - target)[keep].mean())
 
+    def tried(yaw, scale, depth):
+        place, labels = _placed(asset, centre, height, yaw, scale, camera, depth)
+        return score(labels), place
+
     def best_yaw(scale, depth):
-        found = (np.inf, None)
-        for yaw in np.arange(settings.yaw_steps) * 360.0 / settings.yaw_steps:
-            place, labels = _placed(asset, centre, height, yaw, scale, camera, depth)
-            found = min(found, (score(labels), place), key=lambda x: x[0])
+        grid = np.arange(settings.yaw_steps) * 360.0 / settings.yaw_steps
+        return min((tried(yaw, scale, depth) for yaw in grid), key=lambda x: x[0])
+
+    def best_scale(yaw, found):
+        for growth in np.geomspace(1.0, settings.max_growth, settings.scale_steps):
+            found = min(found, tried(yaw, start * growth, target_depth), key=lambda x: x[0])
         return found
 
     l1, place = best_yaw(start, None)  # the paper's coarse pose
-    if settings.scale_steps > 1:
-        for growth in np.geomspace(1.0, settings.max_growth, settings.scale_steps):
-            trial, labels = _placed(asset, centre, height, place.yaw_deg, start * growth, camera, target_depth)
-            l1, place = min((l1, place), (score(labels), trial), key=lambda x: x[0])
-        l1, place = min((l1, place), best_yaw(place.scale, target_depth), key=lambda x: x[0])
+    if settings.scale_steps <= 1:
+        return place, l1
+    l1, place = best_scale(place.yaw_deg, (l1, place))
+    grid = best_yaw(place.scale, target_depth)
+    if view_yaw is not None:
+        view = tried(view_yaw, place.scale, target_depth)
+        if view[0] <= grid[0] * (1 + settings.yaw_tolerance):
+            grid = view
+    if grid[1].yaw_deg != place.yaw_deg:
+        grid = best_scale(grid[1].yaw_deg, grid)
+    l1, place = grid
     return place, l1

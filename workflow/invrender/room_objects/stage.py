@@ -151,8 +151,17 @@ def _coarse_round(segments, parents, rank, by_name, targets, settings) -> list[P
             height = 0.0 if seg.support == FLOOR else None
         ignore = (occupied - targets.masks[i]) > 0.5  # another object's pixels may hide this one
         target_depth = float(np.median(seg.depth))
+        view_yaw = assets.yaw_from_view(match.azimuth_deg, seg.centre, targets.camera.center)
         place, _ = coarse_placement(
-            seg, by_name[match.name], height, targets.camera, targets.masks[i], ignore, target_depth, settings.coarse
+            seg,
+            by_name[match.name],
+            height,
+            targets.camera,
+            targets.masks[i],
+            ignore,
+            target_depth,
+            settings.coarse,
+            view_yaw,
         )
         placed.append(place)
     return placed
