@@ -26,11 +26,12 @@ SETTINGS = stage.Settings(candidates=2, refine=RefineSettings(iterations=30, max
 
 def test_stage_retrieves_places_and_refines_the_objects(tmp_path):
     """Measured (240 x 180 photo, targets 120 x 90, 2 candidates, 30 steps): every asset retrieved
-    and kept; the supports found (the crate on the table); positions 0.11 -> 0.03 m on average
-    (each refined within 4.2 cm), scales 4 % -> 0.7 %, yaw: table 25 -> 0.1 degrees, armchair
-    20 -> 13.5 (its silhouette at 120 x 90 pixels says little more); mean mask IoU 0.64 -> 0.89.
-    The crate (box_a, 0.95 x 0.86 x 1) is nearly a cube: its yaw is only known modulo 90 degrees
-    (the library gives it a symmetry of 2), so its yaw is not asserted."""
+    and kept; the supports found (the crate on the table); positions 0.12 -> 0.017 m on average
+    (each refined within 3.4 cm), scales 13 % -> 0.1 %, yaw: table 2.0 -> 0.8 degrees (its coarse
+    yaw is the retrieval's view), armchair 20 -> 14 (its silhouette at 120 x 90 pixels says little
+    more); mean mask IoU 0.55 -> 0.87. The crate (box_a, 0.95 x 0.86 x 1) is nearly a cube: its
+    yaw is only known modulo 90 degrees (the library gives it a symmetry of 2), so its yaw is not
+    asserted."""
     capture, room = write_capture(tmp_path / "capture")
     report = stage.run(capture, room, tmp_path / "out", SETTINGS)
     assert json.loads((tmp_path / "out" / "objects.json").read_text()) == report
@@ -46,13 +47,12 @@ def test_stage_retrieves_places_and_refines_the_objects(tmp_path):
     assert refined["asset_accuracy"] == 1.0 and refined["category_accuracy"] == 1.0
     rows = refined["per_object"]
     table, crate, chair = (str(by_name[n]["segment"]) for n in ("coffee_table", "crate", "armchair"))
-    assert max(r["position_error"] for r in rows.values()) < 0.07
-    assert max(r["scale_error"] for r in rows.values()) < 0.04
+    assert max(r["position_error"] for r in rows.values()) < 0.06
+    assert max(r["scale_error"] for r in rows.values()) < 0.03
     assert rows[table]["yaw_error_deg"] < 3 and rows[chair]["yaw_error_deg"] < 20
     assert refined["position_error"] < 0.5 * coarse["position_error"]
     assert refined["scale_error"] < coarse["scale_error"]
-    assert rows[table]["yaw_error_deg"] < coarse["per_object"][table]["yaw_error_deg"]
-    assert refined["mean_mask_iou"] > 0.85 and refined["mean_mask_iou"] > coarse["mean_mask_iou"] + 0.15
+    assert refined["mean_mask_iou"] > 0.83 and refined["mean_mask_iou"] > coarse["mean_mask_iou"] + 0.15
     for obj in report["objects"]:
         # The chosen candidate has the least exact loss (a later rank's raised by RANK_MARGIN per
         # rank), and the exact (z-buffer) loss agrees with the refinement's Monte Carlo one
