@@ -172,6 +172,26 @@ def cmd_room_lights(args):
     )
 
 
+def cmd_room_objects(args):
+    from .room_objects import stage
+    from .room_objects.refine import RefineSettings
+
+    stage.run(
+        args.capture,
+        args.room,
+        args.out,
+        settings=stage.Settings(
+            candidates=args.candidates,
+            asset_dirs=tuple(args.asset_dir or ()),
+            refine=RefineSettings(iterations=args.iterations, spp=args.spp, max_width=args.max_width),
+        ),
+        truth_dir=args.truth,
+        files={name: getattr(args, name) for name in ("photo", "depth", "ids", "labels") if getattr(args, name)},
+        seed=args.seed,
+        device=args.device,
+    )
+
+
 def cmd_gradients(args):
     from .gradients import stage
 
@@ -612,6 +632,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="render seed")
     p.add_argument("--device", help="OpenCL device for the unit-radiance render (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_room_lights)
+
+    p = stages.add_parser(
+        "room-objects", help="the room's objects retrieved, placed and refined (Eq. 3) -> objects.json, figure"
+    )
+    p.add_argument("capture", help="room capture directory (photo, depth.exr, panoptic.png/json)")
+    p.add_argument("--room", required=True, help="the room_box stage's output directory (room.json)")
+    p.add_argument("--out", required=True, help="directory to write (objects.json, room_objects.png)")
+    p.add_argument("--truth", help="truth directory (room.json; default: the capture's truth/ if any)")
+    for name, what in (
+        ("photo", "photograph"),
+        ("depth", "depth EXR"),
+        ("ids", "segment id PNG"),
+        ("labels", "label table"),
+    ):
+        p.add_argument(f"--{name}", help=f"the {what}, relative to the capture (default: its standard name)")
+    p.add_argument("--asset-dir", action="append", help="a folder of OBJ/PLY/USD models besides the bundled furniture")
+    p.add_argument("--candidates", type=int, default=3, help="assets per object refined; the lowest loss is kept")
+    p.add_argument("--iterations", type=int, default=40, help="Adam steps of the joint refinement (Eq. 3)")
+    p.add_argument("--spp", type=int, default=4, help="samples per pixel of each refinement render")
+    p.add_argument("--max-width", type=int, default=160, help="width of the refinement's targets, at most")
+    p.add_argument("--seed", type=int, default=0, help="render seed")
+    p.add_argument("--device", help="OpenCL device for the refinement's renders (default: a GPU, else PoCL)")
+    p.set_defaults(func=cmd_room_objects)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")

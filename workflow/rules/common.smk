@@ -630,7 +630,11 @@ def scene_targets(scene):
             f"{results}/milo/weights.pt",
         ]
     if has_room_inputs(scene):
-        targets += [f"{results}/room_box", f"{results}/room_lights"]
+        targets += [
+            f"{results}/room_box",
+            f"{results}/room_lights",
+            f"{results}/room_objects",
+        ]
         # the room scene (bake_room) and what runs on any scene directory
         targets += [
             f"{results}/scene",
@@ -1254,3 +1258,16 @@ def room_evaluate_options(wildcards):
         for stage in room_stages_present()
         if stage != "room_materials"
     )
+
+
+def room_objects_options(wildcards):
+    """The capture's named files (room_box's) and the config's room_objects settings as flags."""
+    settings = config["room_objects"]
+    options = [
+        f"--{key} {shlex.quote(value)}"
+        for key, value in room_box_capture_files(wildcards).items()
+    ]
+    for key in ("iterations", "spp", "candidates", "max_width", "seed"):
+        options.append(f"--{key.replace('_', '-')} {settings[key]}")
+    options += [f"--asset-dir {shlex.quote(d)}" for d in settings["asset_dirs"]]
+    return " ".join(options)
