@@ -164,7 +164,7 @@ BAD_CONFIGS = {
         {"render": {"spp": 4}, "scene": {}},
         [
             "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
-            "duplicates_material, milo, evaluate, accuracy, edit, export, bake_room"
+            "room_objects, duplicates_material, milo, evaluate, accuracy, edit, export, bake_room"
         ],
     ),
     "typo in a scene": (
