@@ -261,7 +261,9 @@ def _sampson(F: np.ndarray, xy_a: np.ndarray, xy_b: np.ndarray) -> np.ndarray:
     return np.sqrt(numerator / np.maximum(Fa[:, 0] ** 2 + Fa[:, 1] ** 2 + Fb[:, 0] ** 2 + Fb[:, 1] ** 2, 1e-30))
 
 
-def pair_support(poses: dict[int, np.ndarray], K: np.ndarray, pairs, max_error_px: float) -> dict[tuple[int, int], float]:
+def pair_support(
+    poses: dict[int, np.ndarray], K: np.ndarray, pairs, max_error_px: float
+) -> dict[tuple[int, int], float]:
     """Per pair of posed copies with matches: the share of its matches within ``max_error_px``
     (Sampson) of the epipolar geometry of the two poses. A pair that verified on look-alike faces
     (box-10-hd's (9, 10): 386 matches, 1 correct) disagrees with the poses the other pairs fix."""

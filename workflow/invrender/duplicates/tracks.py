@@ -39,11 +39,13 @@ DETECTION_THRESHOLD = 0.01  # XFeat's default 0.05 keeps a third of the print's 
 MAX_KEYPOINTS = 4096  # per copy, the most confident first
 # The angle search again on the fixed keypoints (``search_angles``): the most confident keypoints
 # of each copy vote, as mutual nearest neighbours of XFeat's descriptors that pass Lowe's ratio
-# test (on test_tracks' turned crops the peak stands 13x above the angles half a turn away with
-# the ratio test at 0.8; with a floor of 0.8 on the similarity instead, 1.6x).
+# test (on test_tracks' turned crops the peak stands 10-13x above the angles half a turn away
+# with the ratio test at 0.8; with a floor of 0.8 on the similarity instead, 1.6-1.7x).
 # Cheap (a product of two descriptor tables per angle; LighterGlue's 3-4 s per angle on 4,096
-# keypoints is not), and on box-10-hd the crop search's angle was wrong for most pairs that share
-# faces: (2, 3) no correct match at its 16 degrees, 337 of 503 at 224 (docs/duplicates.md).
+# keypoints is not). On box-10-hd the crop search's angle was wrong for most pairs that share
+# faces ((2, 3): no correct match at its 16 degrees, 313 at the 240 this search found), but on
+# most pairs the counts peak at 4-35 of 1,024 and the peak is noise; LighterGlue at both angles
+# then keeps the crop search's (docs/duplicates.md, "Angles searched again").
 SEARCH_KEYPOINTS = 1024
 SEARCH_RATIO = 0.8
 SEARCH_STEP_DEG = 8.0
