@@ -55,6 +55,11 @@ __all__ = ["Settings", "run_crop", "run"]
 log = logging.getLogger(__name__)
 
 MIN_INSTANCES = 3  # two views give one relative pose and nothing to check it against
+# The hull carved from the poses, drawn back at each (refine.coverage), covers a copy's mask at
+# 0.85-0.99 IoU where the model is right (box-20-hd, box-6-hd with track_search), 0.03-0.88 where
+# it is wrong (box-10-hd: 0.24-0.65 on average; box-20-hd's copy at 67 degrees: 0.36): below this
+# the stage says that a copy's pose disagrees with the others'.
+MIN_COVERAGE = 0.8
 
 
 @dataclass
@@ -256,6 +261,13 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
     mesh = _carve(ids, registration.poses, K, registration.points, settings)
+    coverage = refine.coverage(mesh, K, ids, registration.poses)
+    doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
+    if doubtful:
+        log.warning(
+            "the hull covers the masks of %s at IoU %s (mean %.2f): their poses disagree with the others'",
+            doubtful, [round(coverage[i], 2) for i in doubtful], float(np.mean(list(coverage.values()))),
+        )  # fmt: skip
     # COLMAP's origin can lie anywhere, even behind the camera: the object frame starts at the
     # hull's centroid, so every pose's translation is the object's centre in the camera
     centre = mesh.positions.astype(np.float64).mean(axis=0)
@@ -274,6 +286,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         "mesh": mesh,
         "rounds": rounds,
         "subpixel": subpixel,
+        "coverage": coverage,
         "timings": timings,
     }
 
@@ -414,6 +427,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
         "pairs": found["pairs"],
         "refinement": found["rounds"],
         "subpixel": found["subpixel"],
+        "hull_coverage": {str(i): float(c) for i, c in sorted(found["coverage"].items())},
         "scale": note,
         "mesh": {"vertices": int(len(mesh.positions)), "faces": int(len(mesh.faces))},
         "timings": found["timings"],
