@@ -12,8 +12,9 @@ wrong pose.
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
-from invrender.duplicates import hull
+from invrender.duplicates import hull, refine
 from invrender.scene.atlas import triangle_areas
 from invrender.scene.types import Mesh
 from invrender.synthesize.duplicates import make_duplicates, object_mesh
@@ -273,3 +274,29 @@ def test_refusals(cans):
     far = (bounds[0] + 10.0, bounds[1] + 10.0)  # nothing of the object in there: all carved
     with pytest.raises(ValueError, match="the hull is empty"):
         hull.hull_mesh(hull.carve(ids, poses, K, far, resolution=16))
+
+
+def test_the_hull_covers_the_masks_of_right_poses_only(cans):
+    """refine.coverage, the stage's self-check: the hull carved from the true poses, drawn back at
+    them, covers each copy's mask (drawn by this file's own rasteriser); carved from poses that
+    are all wrong (each copy turned 40 degrees about its own random axis) it covers them poorly,
+    and a single copy turned 30 degrees after carving stands out."""
+    mesh, poses, K, ids = cans
+    bounds = hull.bounds_from_masks(ids, poses, K)
+    right, _ = hull.visual_hull(ids, poses, K, bounds, resolution=96)
+    covered = refine.coverage(right, K, ids, poses)
+    assert min(covered.values()) > 0.9, covered
+    rng = np.random.default_rng(3)
+    wrong = {}
+    for i, T in poses.items():
+        axis = rng.normal(size=3)
+        turn = np.eye(4)
+        turn[:3, :3] = Rotation.from_rotvec(np.radians(40.0) * axis / np.linalg.norm(axis)).as_matrix()
+        wrong[i] = T @ turn  # turned in the object frame, about the object's origin
+    carved, _ = hull.visual_hull(ids, wrong, K, hull.bounds_from_masks(ids, wrong, K), resolution=96)
+    assert np.mean(list(refine.coverage(carved, K, ids, wrong).values())) < 0.75
+    one = dict(poses)
+    one[3] = poses[3] @ np.block([[Rotation.from_euler("x", 30, degrees=True).as_matrix(), np.zeros((3, 1))],
+                                  [np.zeros((1, 3)), np.ones((1, 1))]])  # fmt: skip
+    single = refine.coverage(right, K, ids, one)
+    assert single[3] < min(v for i, v in single.items() if i != 3) - 0.1, single

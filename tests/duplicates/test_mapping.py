@@ -116,3 +116,20 @@ def seed_0_poses(models, instance_ids):
         if image.has_pose:
             poses[by_name[image.name]] = np.vstack([image.cam_from_world().matrix(), [0, 0, 0, 1.0]])
     return poses
+
+
+def test_pair_support_tells_a_pair_matched_on_another_copys_geometry(truth):
+    """At the true poses, a pair's true correspondences (0.5 px noise) agree with its epipolar
+    geometry; a pair whose matches are consistent but belong to another pair's geometry (copy a's
+    points matched to where copy c shows them: look-alike faces) does not, nor do shuffled ones."""
+    camera, K, obj, T_world, T_cam = truth
+    pairs = correspondences(camera, obj, T_world, 0.5, 0.0, np.random.default_rng(0))
+    (a, b), (_, c) = sorted(pairs)[0], sorted(pairs)[1]  # (1, 2) and (1, 3)
+    right = mapping.pair_support(T_cam, K, {(a, b): pairs[a, b]}, 2.0)[a, b]
+    assert right > 0.95, right
+    look_alike = {(a, b): pairs[a, c]}  # (1, 3)'s correspondences filed as (1, 2)'s
+    assert mapping.pair_support(T_cam, K, look_alike, 2.0)[a, b] < 0.3
+    xy_a, xy_b = pairs[a, b]
+    shuffled = {(a, b): (xy_a, np.random.default_rng(1).permutation(xy_b))}
+    assert mapping.pair_support(T_cam, K, shuffled, 2.0)[a, b] < 0.3
+    assert mapping.pair_support({a: T_cam[a]}, K, pairs, 2.0) == {}  # pairs of unposed copies are skipped

@@ -58,3 +58,36 @@ def test_three_copies_share_points(pairs):
     via_1 = {tuple(p) for p in pairs[1, 2][1]}
     via_3 = {tuple(p) for p in pairs[2, 3][0]}
     assert len(via_1 & via_3) >= 20, len(via_1 & via_3)
+
+
+def _off(angle, truth):
+    return abs((angle - truth + 180.0) % 360.0 - 180.0)
+
+
+@pytest.fixture(scope="module")
+def curves(features):
+    return tracks.search_angles(features, [(1, 2), (1, 3), (2, 3)])
+
+
+def test_the_search_on_fixed_keypoints_peaks_at_the_true_turn(curves):
+    """Mutual nearest neighbours of the copies' own descriptors, per angle: the count's peak is
+    within one and a half steps (12 degrees) of the true turn (copy 2: 120 for 110), and well above
+    the angles half a turn away."""
+    for (a, b), (grid, counts) in curves.items():
+        truth = TURNS[b] - TURNS[a]
+        peak = grid[int(np.argmax(counts))]
+        assert _off(peak, truth) <= 1.5 * tracks.SEARCH_STEP_DEG, (a, b, peak, truth)
+        far = counts[[_off(g, truth) > 90 for g in grid]]
+        assert counts.max() >= 5 * max(1, far.max()), (a, b, counts.max(), far.max())
+
+
+def test_rematch_keeps_the_angle_with_more_matches(features, curves):
+    """Given a crop search that chose the wrong half-turn, rematch matches at the fixed keypoints'
+    peak as well and keeps it: its matches are the true correspondences."""
+    wrong = {(a, b): TURNS[b] - TURNS[a] + 180.0 for a, b in curves}
+    found, chosen = tracks.rematch(features, wrong, curves)
+    for (a, b), angle in chosen.items():
+        assert _off(angle, TURNS[b] - TURNS[a]) <= 1.5 * tracks.SEARCH_STEP_DEG, (a, b, angle)
+        xy_a, xy_b = found[a, b]
+        truth = rotate_points(true_xy_a(xy_b, TURNS[b]), -TURNS[a], (80, 80), (80, 80))
+        assert np.median(np.linalg.norm(xy_a - truth, axis=1)) < 3.0, (a, b)

@@ -207,6 +207,21 @@ def _silhouette_residual(mesh: Mesh, target: _Target, T: np.ndarray) -> tuple[np
     return res.ravel(), float(1.0 - inter / max(union, 1e-9))
 
 
+def coverage(mesh: Mesh, K: np.ndarray, ids: np.ndarray, poses: dict[int, np.ndarray], max_side: int = 256,
+             margin: float = 0.1) -> dict[int, float]:  # fmt: skip
+    """Per posed instance, the soft IoU of ``mesh``'s silhouette at its pose with its mask (pixels
+    another instance covers left out), at a working resolution of ``max_side`` pixels per box.
+    The hull carved from a wrong model's poses covers the masks poorly: a self-check of the
+    poses that needs no truth (docs/duplicates.md, "Angles searched again")."""
+    boxes = instance_boxes(ids)
+    out = {}
+    for i, T in poses.items():
+        if i in boxes:
+            target = _target(ids, K, i, boxes[i], max_side, margin)
+            out[i] = 1.0 - _silhouette_residual(mesh, target, np.asarray(T, np.float64))[1]
+    return out
+
+
 @dataclass
 class _Appearance:
     """The photo (slightly blurred against render noise), the id image, and the surface points

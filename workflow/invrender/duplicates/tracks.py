@@ -30,10 +30,25 @@ import numpy as np
 from . import matching
 from .crops import Crop
 
-__all__ = ["TrackFeatures", "detect", "match_at_angle", "match_pairs", "DETECTION_THRESHOLD", "MAX_KEYPOINTS"]
+__all__ = [
+    "TrackFeatures", "detect", "match_at_angle", "match_pairs", "search_angles", "rematch",
+    "DETECTION_THRESHOLD", "MAX_KEYPOINTS",
+]  # fmt: skip
 
 DETECTION_THRESHOLD = 0.01  # XFeat's default 0.05 keeps a third of the print's corners and dots
 MAX_KEYPOINTS = 4096  # per copy, the most confident first
+# The angle search again on the fixed keypoints (``search_angles``): the most confident keypoints
+# of each copy vote, as mutual nearest neighbours of XFeat's descriptors that pass Lowe's ratio
+# test (on test_tracks' turned crops the peak stands 10-13x above the angles half a turn away
+# with the ratio test at 0.8; with a floor of 0.8 on the similarity instead, 1.6-1.7x).
+# Cheap (a product of two descriptor tables per angle; LighterGlue's 3-4 s per angle on 4,096
+# keypoints is not). On box-10-hd the crop search's angle was wrong for most pairs that share
+# faces ((2, 3): no correct match at its 16 degrees, 313 at the 240 this search found), but on
+# most pairs the counts peak at 4-35 of 1,024 and the peak is noise; LighterGlue at both angles
+# then keeps the crop search's (docs/duplicates.md, "Angles searched again").
+SEARCH_KEYPOINTS = 1024
+SEARCH_RATIO = 0.8
+SEARCH_STEP_DEG = 8.0
 
 
 @dataclass
@@ -126,3 +141,52 @@ def match_pairs(features: dict[int, TrackFeatures], angles: dict[tuple[int, int]
         idx = match_at_angle(features[a], features[b], angle)
         out[a, b] = (full[a][idx[:, 0]], full[b][idx[:, 1]])
     return out
+
+
+def _mutual_count(da: np.ndarray, db: np.ndarray, ratio: float) -> int:
+    """Mutual nearest neighbours of two descriptor tables (unit rows) whose distance is below
+    ``ratio`` times the distance to a's second nearest in b."""
+    if len(da) < 1 or len(db) < 2:
+        return 0
+    s = da @ db.T
+    rows = np.arange(len(da))
+    ab, ba = s.argmax(axis=1), s.argmax(axis=0)
+    first = s[rows, ab]
+    s[rows, ab] = -np.inf
+    second = s.max(axis=1)
+    distance = lambda similarity: np.sqrt(np.maximum(2.0 - 2.0 * similarity, 0.0))  # noqa: E731
+    return int(((ba[ab] == rows) & (distance(first) < ratio * distance(second))).sum())
+
+
+def search_angles(features: dict[int, TrackFeatures], pairs, step_deg: float = SEARCH_STEP_DEG,
+                  keypoints: int = SEARCH_KEYPOINTS, ratio: float = SEARCH_RATIO):  # fmt: skip
+    """Per pair (a, b): (angles, counts), the rotation search on the copies' fixed keypoints: a's
+    ``keypoints`` most confident upright against b's turned by every multiple of ``step_deg``, the
+    count of mutual nearest neighbours that pass the ratio test per angle. b's descriptors are
+    computed once per angle."""
+    angles = np.arange(0.0, 360.0, step_deg)
+    out = {}
+    for b in sorted({q for _, q in pairs}):
+        turned = [describe(features[b], angle)[1][:keypoints] for angle in angles]
+        for a in sorted(p for p, q in pairs if q == b):
+            da = features[a].descriptors[:keypoints]
+            out[a, b] = angles, np.array([_mutual_count(da, db, ratio) for db in turned])
+    return out
+
+
+def rematch(features: dict[int, TrackFeatures], angles: dict[tuple[int, int], float], curves, window: int = 3):
+    """``match_pairs`` at the better of two angles per pair: the crop search's and the peak of
+    ``search_angles``' smoothed counts; LighterGlue at both (one when they are within a step),
+    the angle with more matches kept. Returns (matches as match_pairs', chosen angle per pair)."""
+    full = {i: f.crop.to_full(f.keypoints) for i, f in features.items()}
+    out, chosen = {}, {}
+    for (a, b), angle in angles.items():
+        grid, counts = curves[a, b]
+        peak = float(grid[int(np.argmax(matching.smooth_counts(counts, window)))])
+        step = float(grid[1] - grid[0]) if len(grid) > 1 else 360.0
+        distance = abs((peak - angle + 180.0) % 360.0 - 180.0)
+        candidates = [angle] if distance < step else [angle, peak]
+        found = [(match_at_angle(features[a], features[b], c), c) for c in candidates]
+        idx, chosen[a, b] = max(found, key=lambda f: len(f[0]))
+        out[a, b] = (full[a][idx[:, 0]], full[b][idx[:, 1]])
+    return out, chosen
