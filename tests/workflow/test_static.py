@@ -22,6 +22,7 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
 RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box", "room_lights"}
+RULES |= {"bake_room"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
 RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy", "room_lights"}
@@ -61,8 +62,10 @@ def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     # the demo's recovery sweep is the schema's quick one: 4 MILO runs and 3 of the material stage;
     # its third scene, the living room photo, is synthesized and gets its room box and lights
-    expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1, "room_lights": 1}
-    expected["synthesize"] = FULL_RUN_JOBS["synthesize"] + 1
+    # and its room scene (bake_room), with features, render and export on it
+    expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1, "room_lights": 1, "bake_room": 1}
+    for rule in ("synthesize", "features", "render", "export"):
+        expected[rule] = FULL_RUN_JOBS[rule] + 1
     assert job_counts(result.stdout) == expected
 
 

@@ -235,8 +235,24 @@ def cmd_duplicates_material(args):
 
 
 def cmd_bake(args):
-    from .bake import duplicates, stage
+    from .bake import duplicates, room, stage
 
+    if args.room:
+        room.run(
+            args.room,
+            args.out,
+            lights_dir=args.lights,
+            objects_dir=args.objects,
+            materials_dir=args.materials,
+            capture_dir=args.capture,
+            asset_dirs=args.assets,
+            texels_per_meter=args.texels_per_meter,
+            capture_files={name: getattr(args, name) for name in ("photo", "ids", "labels") if getattr(args, name)},
+        )
+        return
+    for flag in ("geometry", "cameras"):
+        if not getattr(args, flag):
+            raise SystemExit(f"bake: --{flag} is required with --maps or --poses")
     if args.poses:
         if not args.masks and not args.material:
             raise SystemExit("bake --poses: --masks (the instance id PNG) or --material is required")
@@ -620,13 +636,23 @@ def build_parser() -> argparse.ArgumentParser:
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--maps", help="maps.npz of the milo stage (a multiview scene)")
     source.add_argument("--poses", help="poses.json of the duplicates stage: the mesh instanced at every pose")
-    p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")
-    p.add_argument("--cameras", required=True, help="COLMAP model directory (with images/ for --poses)")
+    source.add_argument("--room", help="room_box stage output (room.json): a room scene (docs/room.md, Bake)")
+    p.add_argument("--geometry", help="geometry stage output (mesh.ply with UVs, atlas.npz); --maps, --poses")
+    p.add_argument("--cameras", help="COLMAP model directory (with images/ for --poses); --maps, --poses")
     p.add_argument("--training", help="training.json of the milo stage (recorded in scene.json's metadata)")
     p.add_argument("--masks", help="with --poses: the instance id PNG (which copy each pixel shows)")
     p.add_argument(
         "--material", help="with --poses: the duplicates-material stage's folder (recovered atlas, sky, support)"
     )
+    p.add_argument("--lights", help="with --room: room_lights stage output (lights.json)")
+    p.add_argument("--objects", help="with --room: room_objects stage output (objects.json)")
+    p.add_argument("--materials", help="with --room: room_materials stage output (materials.json)")
+    p.add_argument("--capture", help="with --room: the room capture (panoptic.json names each object's class)")
+    p.add_argument("--assets", action="append", default=[], help="with --room: a folder of user models (repeatable)")
+    p.add_argument("--texels-per-meter", type=float, default=64.0, help="with --room: the atlases' texel density")
+    p.add_argument("--ids", help="with --room: the capture's segment id PNG (relative to it)")
+    p.add_argument("--labels", help="with --room: the capture's label table (relative to it)")
+    p.add_argument("--photo", help="with --room: the capture's photo (relative to it)")
     p.add_argument("--out", required=True, help="scene directory to write")
     p.set_defaults(func=cmd_bake)
 

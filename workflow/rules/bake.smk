@@ -68,3 +68,37 @@ rule bake_duplicates:
         "invrender --log {log} bake --poses {input.duplicates}/poses.json --masks {params.masks:q}"
         " --material results/{wildcards.scene}/material"
         " --geometry {input.geometry} --cameras {input.cameras} --out {output}"
+
+
+rule bake_room:
+    """A room scene directory (mode room, issue 16): the room box as inward-facing walls, floor
+    and ceiling, the room_lights stage's lights as one-sided emitters, and, where those stages
+    exist, the room_objects stage's placed assets and the room_materials stage's materials,
+    seen by the photo's camera (workflow/invrender/bake/room.py)."""
+    input:
+        unpack(room_scene_inputs),
+    output:
+        report(
+            directory("results/{scene}/scene"),
+            patterns=["{name}.json"],
+            caption="../report/bake.rst",
+            category="Scene",
+            labels={"scene": "{scene}", "file": "{name}.json"},
+        ),
+    log:
+        "results/{scene}/logs/bake.log",
+    benchmark:
+        "results/{scene}/benchmarks/bake_room.tsv"
+    wildcard_constraints:
+        scene=scenes_pattern(ROOM),
+    conda:
+        "../../envs/render.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        capture=capture_dir,
+        options=bake_room_options,
+    shell:
+        "invrender --log {log} bake --room {input.room:q} --out {output} {params.options}"

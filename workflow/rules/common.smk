@@ -614,6 +614,7 @@ def recovers(scene):
 
 MULTIVIEW = [name for name in SCENES if mode(name) == "multiview"]
 DUPLICATES = [name for name in SCENES if mode(name) == "duplicates"]
+ROOM = [name for name in SCENES if mode(name) == "room"]
 
 
 def scene_targets(scene):
@@ -630,6 +631,15 @@ def scene_targets(scene):
         ]
     if has_room_inputs(scene):
         targets += [f"{results}/room_box", f"{results}/room_lights"]
+        # the room scene (bake_room) and what runs on any scene directory
+        targets += [
+            f"{results}/scene",
+            f"{results}/features.json",
+            f"{results}/renders",
+            f"{results}/export",
+        ]
+        if SCENES[scene]["edits"]:
+            targets.append(f"{results}/edits")
     if mode(scene) == "duplicates" and has_cameras(scene):
         targets += [
             f"{results}/segmentation",
@@ -912,7 +922,11 @@ def edit_truth(wildcards):
 def edit_truth_option(wildcards):
     if not is_synthetic(wildcards.scene):
         return ""
-    return f"--truth {shlex.quote(os.path.join(capture_dir(wildcards), 'ground_truth', 'scene'))}"
+    # a room photo's truth scene is truth/scene (scene/room_photo.py's layout)
+    truth = "truth" if mode(wildcards.scene) == "room" else "ground_truth"
+    return (
+        f"--truth {shlex.quote(os.path.join(capture_dir(wildcards), truth, 'scene'))}"
+    )
 
 
 def device_option(wildcards):
@@ -1173,3 +1187,44 @@ def room_lights_options(wildcards):
         for key, value in room_box_capture_files(wildcards).items()
         if key != "depth"
     )
+
+
+# ---------------------------------------------------------------------------- room scene
+# (the input functions of bake_room in workflow/rules/bake.smk and evaluate_room)
+
+# The room stages after room_box whose outputs the room scene takes when their rule exists
+# (room_objects and room_materials are written in parallel with bake_room: each is taken from
+# results/{scene}/<stage> as soon as its rule is part of the workflow).
+ROOM_SCENE_STAGES = {
+    "room_lights": "lights",
+    "room_objects": "objects",
+    "room_materials": "materials",
+}
+
+
+def room_stages_present():
+    """The room stages (ROOM_SCENE_STAGES) whose rules this workflow defines."""
+    defined = {rule.name for rule in workflow.rules}
+    return [stage for stage in ROOM_SCENE_STAGES if stage in defined]
+
+
+def room_scene_inputs(wildcards):
+    results = f"results/{wildcards.scene}"
+    inputs = {"room": f"{results}/room_box", "capture": room_box_input(wildcards)}
+    for stage in room_stages_present():
+        inputs[ROOM_SCENE_STAGES[stage]] = f"{results}/{stage}"
+    return inputs
+
+
+def bake_room_options(wildcards):
+    """--lights/--objects/--materials for the stages present, the capture and its named files,
+    and the texel density."""
+    results = f"results/{wildcards.scene}"
+    options = [
+        f"--{ROOM_SCENE_STAGES[stage]} {results}/{stage}"
+        for stage in room_stages_present()
+    ]
+    options.append(f"--capture {shlex.quote(capture_dir(wildcards))}")
+    options.append(room_lights_options(wildcards))
+    options.append(f"--texels-per-meter {config['bake_room']['texels_per_meter']}")
+    return " ".join(option for option in options if option)
