@@ -30,6 +30,7 @@ include: "workflow/rules/edit.smk"
 include: "workflow/rules/accuracy.smk"
 include: "workflow/rules/room_box.smk"
 include: "workflow/rules/room_lights.smk"
+include: "workflow/rules/room_materials.smk"
 
 
 # Trivial steps run where snakemake runs (on a cluster: the login node), not through the queue:

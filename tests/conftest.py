@@ -12,6 +12,7 @@ import invrender.mitsuba.llvm  # noqa: E402, F401
 
 HERE = Path(__file__).parent
 HELPER_DIRS = ("render", "geometry", "import_", "fuzz", "milo", "duplicates_material", "materials", "room_box")
+HELPER_DIRS += ("room_materials",)
 for helper_dir in (HERE, *(HERE / name for name in HELPER_DIRS)):
     if str(helper_dir) not in sys.path:
         sys.path.insert(0, str(helper_dir))

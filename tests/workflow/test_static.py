@@ -22,10 +22,11 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
 RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box", "room_lights"}
-RULES |= {"bake_room"}
+RULES |= {"bake_room", "room_materials"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
 RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy", "room_lights"}
+RAY_TRACING_RULES |= {"room_materials"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -64,6 +65,7 @@ def test_dry_run_of_the_demo(tmp_path):
     # its third scene, the living room photo, is synthesized and gets its room box and lights
     # and its room scene (bake_room), with features, render and export on it
     expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1, "room_lights": 1, "bake_room": 1}
+    expected["room_materials"] = 1  # bake_room takes it as soon as its rule exists
     for rule in ("synthesize", "features", "render", "export"):
         expected[rule] = FULL_RUN_JOBS[rule] + 1
     assert job_counts(result.stdout) == expected

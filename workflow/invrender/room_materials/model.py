@@ -199,3 +199,47 @@ def crop_camera(camera: Camera, rect, max_size: int, name: str) -> Camera:
     fx, fy, cx, cy = np.asarray(camera.params, float)[:4]
     params = np.array([fx * sx, fy * sy, (cx - rect.x) * sx, (cy - rect.y) * sy])
     return Camera(name, "PINHOLE", w, h, params, camera.R, camera.t)
+
+
+def from_room_scene(scene, labels: dict, assets: dict) -> tuple[list[Part], list[Light]]:
+    """The parts and lights of a scene from scene/room_scene.assemble_room, by its metadata:
+    each box surface one part (plane layout, the photo segments of its class); each object's
+    asset part one part (box mapping, the object's segment), except a lamp's emissive parts,
+    which are a light; each light quad a light (its radiance read from the maps)."""
+    from ..scene.atlas import texel_index
+
+    meta = scene.metadata
+    parts, lights = [], []
+    start = 0
+    by_class: dict[str, list[int]] = {}
+    for sid, (cls, _) in (labels or {}).items():
+        by_class.setdefault(cls, []).append(int(sid))
+    for obj, inst in zip(scene.objects, meta["instances"]):
+        n = len(obj.mesh.faces)
+        faces = np.arange(start, start + n)
+        name, kind = inst["name"], inst["kind"]
+        if kind == "box":
+            s = meta["surfaces"][name]
+            plane = (np.asarray(s["origin"]), np.asarray(s["u_axis"]), np.asarray(s["v_axis"]))
+            parts.append(Part(name, faces, tuple(by_class.get(inst["class"], ())), plane))
+        elif kind == "object":
+            asset = assets.get(inst.get("asset"))
+            emissive = set(asset.emissive_parts) if asset is not None and inst["class"] == "lamp" else set()
+            segment = () if inst.get("segment") is None else (int(inst["segment"]),)
+            for part_name, (a, b) in meta["parts"].get(name, {}).items():
+                idx = start + np.arange(a, b)
+                if part_name in emissive:
+                    lights.append(Light(f"{name}.{part_name}", idx, _radiance(scene, idx, texel_index), "lamp"))
+                else:
+                    parts.append(Part(f"{name}.{part_name}", idx, segment, None))
+        else:
+            lights.append(Light(name, faces, _radiance(scene, faces, texel_index), inst["class"]))
+        start += n
+    return parts, lights
+
+
+def _radiance(scene, faces, texel_index) -> np.ndarray:
+    """ke at the first face's centroid in UV (a light's set is constant)."""
+    uv = scene.mesh.uvs[scene.mesh.faces[faces[0]]].mean(0)
+    row, col = texel_index(uv, scene.maps.ke.shape)
+    return np.asarray(scene.maps.ke[row, col], np.float64).copy()
