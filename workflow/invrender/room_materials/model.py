@@ -138,20 +138,30 @@ class RoomModel:
         transport)."""
         m = self.scene.maps
         out = dataclasses.replace(m, **{f.name: getattr(m, f.name).copy() for f in dataclasses.fields(m)})
-        kd, ks, ka, ke = (getattr(out, n).reshape(len(self.texels.mask.ravel()), -1) for n in ("kd", "ks", "ka", "ke"))
+        kd, ks, ka = (getattr(out, n).reshape(len(self.texels.mask.ravel()), -1) for n in ("kd", "ks", "ka"))
         with torch.no_grad():
             for i, mat in enumerate(materials):
                 d, s, a = (t.numpy() for t in self.evaluate(i, mat))
                 idx = self.part_texels[i]
                 kd[idx], ks[idx], ka[idx, 0] = d, s[:, None], a
-        ke[:] = 0.0  # all emission is the lights': what is not a light does not emit
+        for arr in (kd, ks, ka):
+            arr[self.gutter] = arr[self.gutter_source]
+        return self.with_lights(out, radiance, only_light)
+
+    def with_lights(self, maps: Maps, radiance=None, only_light: int | None = None) -> Maps:
+        """``maps`` with ke replaced by the lights' (a copy of ke only: a light render changes
+        no material, and evaluating the procedural parts again for each light was most of a
+        light solve's time)."""
+        ke = np.zeros_like(maps.ke)
+        flat = ke.reshape(-1, 3)
         radiance = [light.radiance for light in self.lights] if radiance is None else radiance
         for j, idx in enumerate(self.light_texels):
-            value = (1.0 if j == only_light else 0.0) if only_light is not None else np.asarray(radiance[j])
-            ke[idx] = value
-        for arr in (kd, ks, ka, ke):
-            arr[self.gutter] = arr[self.gutter_source]
-        return out
+            if only_light is None:
+                flat[idx] = np.asarray(radiance[j])
+            elif j == only_light:
+                flat[idx] = 1.0
+        flat[self.gutter] = flat[self.gutter_source]
+        return dataclasses.replace(maps, ke=ke)
 
     def gather(self, grad_map: np.ndarray) -> list[np.ndarray]:
         """A map's gradient (H, W, C) back to each part's texels: gutter texels' gradients added

@@ -47,7 +47,11 @@ class Eq4Settings:
     spp: int = 8  # per material step (forward and adjoint)
     light_spp: int = 16  # per light render of the light solve
     mean_weight: float = 1.0  # Eq. 4's mean-colour term
-    gram_weight: float = 0.05  # Eq. 4's crop term (each crop's Gram loss relative to a flat crop's)
+    # Eq. 4's crop term: the library's Gram loss (materials/gram.py: each layer in units of its
+    # value on white noise of deviation 0.1, the crop's mean removed; about 1 for a texture
+    # against a flat crop). Not relative to the target's own (a flat target made that ratio
+    # 30 times the rest of Eq. 4 on the test room).
+    gram_weight: float = 0.05
     # "grey": one radiance per light, the same in R, G and B (the paper's uniform initial
     # radiance); "rgb": one per channel. A photo's colour is albedo times light: with RGB lights
     # the two trade colour freely wherever no emitter is seen (measured on the test room: a
@@ -100,8 +104,9 @@ def light_renders(renderer: Renderer, model: RoomModel, materials, camera, spp: 
     the variance of each pixel's mean."""
     requests = pixel_requests(camera)
     means, variances = [], []
+    base = model.maps(materials)
     for j in range(len(model.lights)):
-        renderer.set_maps(model.maps(materials, only_light=j))
+        renderer.set_maps(model.with_lights(base, only_light=j))
         mean, var, _ = renderer.render_requests([camera], requests, spp, seed + 7919 * j)
         means.append(mean.reshape(camera.height, camera.width, 3))
         variances.append(var.reshape(camera.height, camera.width, 3))
@@ -159,7 +164,6 @@ class _Crop:
     camera_index: int
     part: int
     target_grams: list
-    flat_loss: float  # the Gram loss of a flat crop of the target's mean: the term's unit
 
 
 class Eq4:
@@ -192,9 +196,7 @@ class Eq4:
             target = self.targets[1 + k]
             with torch.no_grad():
                 grams = gram_matrices(self.net, target)
-                flat = target.mean(dim=(0, 1)).expand_as(target)
-                unit = float(gram_loss(self.net, flat.permute(2, 0, 1)[None], grams)[0])
-            self.crops.append(_Crop(1 + k, part, grams, max(unit, 1e-12)))
+            self.crops.append(_Crop(1 + k, part, grams))
         self.logits = []
         for mat in materials:
             m = mat.material
@@ -233,7 +235,7 @@ class Eq4:
                 mean_terms.append((small[mask].mean(0) - self.medians[i]).abs().mean())
         mean_term = torch.stack(mean_terms).mean() if mean_terms else torch.zeros(())
         gram_terms = [
-            gram_loss(self.net, images[c.camera_index].permute(2, 0, 1)[None], c.target_grams)[0] / c.flat_loss
+            gram_loss(self.net, images[c.camera_index].permute(2, 0, 1)[None], c.target_grams)[0]
             for c in self.crops
         ]
         gram_term = torch.stack(gram_terms).mean() if gram_terms else torch.zeros(())
@@ -323,10 +325,15 @@ class Eq4:
         started = time.perf_counter()
         for r in range(self.settings.rounds):
             self.light_step()
-            if self.settings.closed_form_albedo:
-                self.albedo_step()
+            record = None
             for _ in range(self.settings.steps):
                 record = self.material_step()
+            # Last in the round, so that Adam's noisy steps (about the learning rate whatever the
+            # gradient) do not leave the plain albedos off their exact value.
+            if self.settings.closed_form_albedo:
+                self.albedo_step()
+            if record is None:
+                continue
             log.info("Eq. 4 round %d: loss %.5f (image %.5f, mean colour %.5f, gram %.4f), %.1f s", r + 1,
                      record["loss"], record["image_l1"], record["mean_colour"], record["gram"], time.perf_counter() - started)
         self.light_step()
