@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 
+import cv2
 import numpy as np
 import torch
 
@@ -30,7 +31,9 @@ from ..materials.retrieval import retrieve
 from ..render.renderer import Renderer, pixel_requests
 from .model import PartMaterial, RoomModel
 
-__all__ = ["plain", "shading_albedo", "retrieve_part"]
+__all__ = ["plain", "seen_radiance", "shading_albedo", "retrieve_part"]
+
+MIN_LIGHT_PIXELS = 4  # a light seen in fewer (eroded) photo pixels keeps the light stage's radiance
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +43,22 @@ ALBEDO_RANGE = (0.01, 0.9)  # the plain material's colour bounds (materials/plai
 def plain(colour) -> PartMaterial:
     c = np.clip(np.asarray(colour, np.float64), *ALBEDO_RANGE)
     return PartMaterial("plain", {"colour": torch.tensor(c, dtype=torch.float32)}, preset="plain_grey")
+
+
+def seen_radiance(photo: np.ndarray, light_ids: np.ndarray, radiance: np.ndarray, colour: str = "grey") -> np.ndarray:
+    """Each light seen in the photo: its radiance is what the photo shows there (the median over
+    its pixels, one pixel in from its outline; grey: the mean of the channels). The light
+    stage's guess is one uniform radiance for all; an emitter in view measures its own, and
+    starting Eq. 4 there spares the alternation its slowest direction (all albedos up, all
+    lights down: on the test room, 4 rounds from a uniform guess 3 to 4.5 times too dark left
+    the walls 0.89 for a true 0.70)."""
+    out = np.array(radiance, np.float64, copy=True)
+    for j in range(len(out)):
+        mask = cv2.erode((light_ids == j).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        if mask.sum() >= MIN_LIGHT_PIXELS:
+            value = np.median(photo[mask], axis=0)
+            out[j] = value.mean() if colour == "grey" else value
+    return out
 
 
 def shading_albedo(

@@ -177,6 +177,14 @@ class RoomModel:
         return np.stack([g[idx].sum(0) for idx in self.light_texels]) if self.lights else np.zeros((0, 3))
 
     # --- pixels -----------------------------------------------------------------------------
+    def light_ids(self, triangle_id: np.ndarray) -> np.ndarray:
+        """The light index of each pixel from a triangle-id AOV (-1: no light)."""
+        tri = np.asarray(triangle_id, np.int64)
+        out = np.full(tri.shape, -1, np.int64)
+        hit = (tri >= 0) & (tri < len(self.face_light))
+        out[hit] = self.face_light[tri[hit]]
+        return out
+
     def part_ids(self, triangle_id: np.ndarray) -> np.ndarray:
         """The part index of each pixel from a triangle-id AOV (-1: no part, a light or nothing)."""
         tri = np.asarray(triangle_id, np.int64)

@@ -39,7 +39,7 @@ from ..scene.room_scene import assemble_room
 from ..scene.types import SceneError
 from .crops import CropPair, crop_rectangles, user_pairs
 from .figures import crops_figure, thumbnails
-from .init import plain, retrieve_part, shading_albedo
+from .init import plain, retrieve_part, seen_radiance, shading_albedo
 from .metrics import psnr, truth_metrics
 from .model import RoomModel, crop_camera, from_room_scene, scaled_camera
 from .optimise import Eq4, Eq4Settings, Views, make_renderer
@@ -129,6 +129,7 @@ def run(
     renderer = make_renderer(model, grey, radiance, device=device)
     aov = renderer.aovs([camera], pixel_requests(camera))
     rendered = model.part_ids(aov["triangle_id"].reshape(photo.height, photo.width))
+    radiance = seen_radiance(photo.image, model.light_ids(aov["triangle_id"].reshape(photo.height, photo.width)), radiance, eq4.light_colour)
     depth = aov["depth"].reshape(photo.height, photo.width)
     photo_masks = _photo_masks(photo, parts)
     inter = [(rendered == i) & photo_masks[i] for i in range(len(parts))]
@@ -224,7 +225,7 @@ def run(
     # A set holding a procedural part is written whole as its baked atlas (bake --room takes a
     # set's atlas, or constants per part).
     atlas_sets = sorted({_set_of(p.name) for p, m in zip(parts, optimiser.materials) if m.kind != "plain"})
-    report = _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_sets)
+    report = _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_sets, radiance)
     report |= {
         "settings": asdict(settings) | {"eq4": asdict(eq4), "seed": seed},
         "inputs": {
@@ -274,7 +275,7 @@ def _lights_json(doc: dict, lights, radiance) -> dict:
     return out
 
 
-def _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_sets) -> dict:
+def _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_sets, seen) -> dict:
     materials = {name: {"atlas": f"maps/{name}.npz"} for name in atlas_sets}
     sets = {}
     for i, (part, mat) in enumerate(zip(parts, optimiser.materials)):
@@ -293,7 +294,7 @@ def _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_
         "sets": sets,
         "lights": {
             light.name: {"kind": light.kind, "radiance": np.round(optimiser.radiance[j], 6).tolist(),
-                         "initial": np.round(light.radiance, 6).tolist()}
+                         "initial": np.round(light.radiance, 6).tolist(), "seen": np.round(seen[j], 6).tolist()}
             for j, light in enumerate(lights)
         },
         "crops": [c.to_json() for c in pairs],
