@@ -294,7 +294,18 @@ class Eq4:
     def material_step(self) -> dict:
         seed = self.seed + 1000 + self.step_count
         self.step_count += 1
-        mean = self.render(self.settings.spp, seed)
+        self.sync()
+        # Each procedural part evaluated once, with its graph: the same values go into the maps
+        # (through the model's cache) and carry the adjoint's gradient back.
+        evaluated = {}
+        for i, mat in enumerate(self.materials):
+            if self.logits[i][1] and mat.kind != "plain":
+                params = self.current(i)
+                kd, ks, ka = self.model.evaluate(i, PartMaterial(mat.kind, params, mat.transform, mat.meters_per_unit))
+                evaluated[i] = kd
+                self.model.prime(i, mat, (kd.detach().numpy(), ks.detach().numpy(), ka.detach().numpy()))
+        self.renderer.set_maps(self.model.maps(self.materials, self.radiance))
+        mean, _, _ = self.renderer.render_requests(self.views.cameras, self.views.requests, self.settings.spp, seed)
         values = torch.from_numpy(mean).requires_grad_(True)
         total, terms = self.loss(values)
         total.backward()
@@ -309,13 +320,15 @@ class Eq4:
             for i, mat in enumerate(self.materials):
                 if not self.logits[i][1]:
                     continue
-                params = self.current(i)
-                kd, _, _ = self.model.evaluate(i, PartMaterial(mat.kind, params, mat.transform, mat.meters_per_unit))
+                if i in evaluated:
+                    kd = evaluated[i]
+                else:  # a plain part: one colour, cheap
+                    kd, _, _ = self.model.evaluate(i, PartMaterial(mat.kind, self.current(i), mat.transform, mat.meters_per_unit))
                 chained = chained + (kd * torch.from_numpy(per_part[i].astype(np.float32))).sum()
             if torch.is_tensor(chained):
                 chained.backward()
                 self.optimizer.step()
-        record = {"step": self.step_count, "loss": float(total), **terms}
+        record = {"step": self.step_count, "loss": float(total.detach()), **terms}
         self.history.append(record)
         return record
 
