@@ -4,7 +4,6 @@ exact light solve, the closed-form plain albedos and Adam steps through the adjo
 every homogeneous albedo and both panels' radiances (each panel seen in the photo)."""
 
 import numpy as np
-import pytest
 from tiny_room import ALBEDO, RADIANCE, render, room_scene
 
 from invrender.render.renderer import pixel_requests
@@ -32,8 +31,19 @@ def test_eq4_recovers_albedo_and_light_scale():
     albedo, _ = shading_albedo(renderer, model, start, camera, photo, masks, medians, spp=16)
     # No crop term: the stage gives it to procedural parts only (a plain crop's Gram matrices
     # would see only the render's noise, whose amplitude grows with the albedo).
-    eq = Eq4(model, [plain(a) for a in albedo], start, renderer, Views(camera, []), [photo],
-             masks, medians, [], Eq4Settings(rounds=4, steps=2, spp=8, light_spp=32), seed=3)
+    eq = Eq4(
+        model,
+        [plain(a) for a in albedo],
+        start,
+        renderer,
+        Views(camera, []),
+        [photo],
+        masks,
+        medians,
+        [],
+        Eq4Settings(rounds=4, steps=2, spp=8, light_spp=32),
+        seed=3,
+    )
     before = eq.evaluate(16, 99)[1]["loss"]
     eq.run()
     after = eq.evaluate(16, 99)[1]["loss"]
@@ -41,5 +51,7 @@ def test_eq4_recovers_albedo_and_light_scale():
     print("radiance", eq.radiance[:, 0], "albedo", found, "loss", before, "->", after)
     for name, value in found.items():
         np.testing.assert_allclose(value, ALBEDO[name], atol=ALBEDO_TOLERANCE, err_msg=name)
-    np.testing.assert_allclose(eq.radiance[:, 0], [RADIANCE["panel_front"], RADIANCE["panel_back"]], rtol=RADIANCE_TOLERANCE)
+    np.testing.assert_allclose(
+        eq.radiance[:, 0], [RADIANCE["panel_front"], RADIANCE["panel_back"]], rtol=RADIANCE_TOLERANCE
+    )
     assert after < 0.5 * before

@@ -8,9 +8,9 @@ import torch
 from tiny_room import RADIANCE, room_scene
 
 from invrender.materials.base import Transform
+from invrender.room_materials.init import plain
 from invrender.room_materials.model import PartMaterial, RoomModel
 from invrender.room_materials.optimise import light_renders, make_renderer, solve_lights
-from invrender.room_materials.init import plain
 
 
 @pytest.fixture(scope="module")
@@ -25,8 +25,12 @@ def test_gather_is_the_adjoint_of_the_write(room):
     _, model = room
     rng = np.random.default_rng(0)
     grad = rng.normal(size=model.scene.maps.kd.shape)
-    checker = PartMaterial("checker", {"colour_a": torch.tensor([0.2, 0.5, 0.7]), "colour_b": torch.tensor([0.6, 0.3, 0.1])},
-                           Transform(3.0), 0.7)
+    checker = PartMaterial(
+        "checker",
+        {"colour_a": torch.tensor([0.2, 0.5, 0.7]), "colour_b": torch.tensor([0.6, 0.3, 0.1])},
+        Transform(3.0),
+        0.7,
+    )
     mats = [plain([0.4, 0.5, 0.6]), checker, plain([0.3, 0.3, 0.3])]
     per_part = model.gather(grad)
     kd, _, _ = model.evaluate(1, checker)

@@ -21,10 +21,24 @@ BOX = {"center": [0.0, 1.25, 0.0], "size": [3.0, 2.5, 3.5], "yaw_deg": 0.0}
 TRUTH = {"floor": [0.3, 0.35, 0.55], "wall": [0.7, 0.6, 0.5], "ceiling": [0.8, 0.8, 0.78]}
 LIGHTS = {
     "lights": [
-        {"kind": "ceiling", "name": "ceiling_0_0", "center": [-0.5, 2.5, -1.0], "e1": [0.7, 0, 0], "e2": [0, 0, 0.6],
-         "normal": [0, -1, 0], "radiance": [6.0] * 3},
-        {"kind": "ceiling", "name": "ceiling_1_0", "center": [0.6, 2.5, -0.3], "e1": [0.7, 0, 0], "e2": [0, 0, 0.6],
-         "normal": [0, -1, 0], "radiance": [9.0] * 3},
+        {
+            "kind": "ceiling",
+            "name": "ceiling_0_0",
+            "center": [-0.5, 2.5, -1.0],
+            "e1": [0.7, 0, 0],
+            "e2": [0, 0, 0.6],
+            "normal": [0, -1, 0],
+            "radiance": [6.0] * 3,
+        },
+        {
+            "kind": "ceiling",
+            "name": "ceiling_1_0",
+            "center": [0.6, 2.5, -0.3],
+            "e1": [0.7, 0, 0],
+            "e2": [0, 0, 0.6],
+            "normal": [0, -1, 0],
+            "radiance": [9.0] * 3,
+        },
     ],
     "lamps": [],
 }
@@ -34,8 +48,13 @@ LABELS = {1: ("wall", "walls"), 2: ("floor", "floor"), 3: ("ceiling", "ceiling")
 
 def _room(camera):
     (fx, fy), (cx, cy) = camera.focal, camera.principal_point
-    cam = {"width": camera.width, "height": camera.height, "params": [fx, fy, cx, cy], "R": camera.R.tolist(),
-           "t": camera.t.tolist()}
+    cam = {
+        "width": camera.width,
+        "height": camera.height,
+        "params": [fx, fy, cx, cy],
+        "R": camera.R.tolist(),
+        "t": camera.t.tolist(),
+    }
     return {"box": BOX, "camera": cam}
 
 
@@ -61,13 +80,21 @@ def capture(tmp_path_factory):
     return path
 
 
-SETTINGS = stage.MaterialSettings(min_width=48, min_crop=8, crop_size=32, init_spp=16, retrieve=False, eval_width=48, eval_spp=16)
+SETTINGS = stage.MaterialSettings(
+    min_width=48, min_crop=8, crop_size=32, init_spp=16, retrieve=False, eval_width=48, eval_spp=16
+)
 
 
 def test_stage_writes_materials_and_lights_near_the_truth(capture):
     out = capture / "out"
-    report = stage.run(capture / "capture", capture / "room_box", out, lights_dir=capture / "room_lights",
-                       settings=SETTINGS, eq4=Eq4Settings(rounds=4, steps=1, light_spp=32))
+    report = stage.run(
+        capture / "capture",
+        capture / "room_box",
+        out,
+        lights_dir=capture / "room_lights",
+        settings=SETTINGS,
+        eq4=Eq4Settings(rounds=4, steps=1, light_spp=32),
+    )
     written = json.loads((out / "materials.json").read_text())
     assert written["materials"] == report["materials"]
     assert set(written["materials"]) == {"floor", "ceiling", "wall_mx", "wall_px", "wall_mz", "wall_pz"}
@@ -90,8 +117,20 @@ def test_stage_writes_materials_and_lights_near_the_truth(capture):
 
 def test_stage_refuses_bad_inputs(capture):
     with pytest.raises(SceneError, match="lights.json"):
-        stage.run(capture / "capture", capture / "room_box", capture / "bad", lights_dir=capture / "nowhere", settings=SETTINGS)
+        stage.run(
+            capture / "capture",
+            capture / "room_box",
+            capture / "bad",
+            lights_dir=capture / "nowhere",
+            settings=SETTINGS,
+        )
     with pytest.raises(SceneError, match="material parts"):
-        stage.run(capture / "capture", capture / "room_box", capture / "bad", lights_dir=capture / "room_lights",
-                  settings=SETTINGS, user_crops=[{"part": "sofa", "photo": [0, 0, 10, 10]}])
+        stage.run(
+            capture / "capture",
+            capture / "room_box",
+            capture / "bad",
+            lights_dir=capture / "room_lights",
+            settings=SETTINGS,
+            user_crops=[{"part": "sofa", "photo": [0, 0, 10, 10]}],
+        )
     assert not (capture / "bad").exists()

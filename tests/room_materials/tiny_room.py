@@ -15,7 +15,13 @@ BLOCK = 16  # texels per quad's block
 ALBEDO = {"walls": (0.70, 0.60, 0.50), "floor": (0.30, 0.35, 0.55), "ceiling": (0.80, 0.80, 0.78)}
 RADIANCE = {"panel_front": 6.0, "panel_back": 9.0}
 SEGMENTS = {"walls": 1, "floor": 2, "ceiling": 3, "panel_front": 4, "panel_back": 5}
-LABELS = {1: ("wall", "walls"), 2: ("floor", "floor"), 3: ("ceiling", "ceiling"), 4: ("lamp", "panel_front"), 5: ("lamp", "panel_back")}
+LABELS = {
+    1: ("wall", "walls"),
+    2: ("floor", "floor"),
+    3: ("ceiling", "ceiling"),
+    4: ("lamp", "panel_front"),
+    5: ("lamp", "panel_back"),
+}
 
 
 def _quads():
@@ -60,8 +66,11 @@ def room_scene(width=64, height=48, albedo=ALBEDO, radiance=RADIANCE):
         else:
             maps.ke[block] = radiance[name]
     mesh = Mesh(
-        positions=np.concatenate(positions), faces=np.concatenate(faces).astype(np.int32), uvs=np.concatenate(uvs),
-        instance_ids=np.array(ids, np.int32), one_sided=np.array(one_sided, bool),
+        positions=np.concatenate(positions),
+        faces=np.concatenate(faces).astype(np.int32),
+        uvs=np.concatenate(uvs),
+        instance_ids=np.array(ids, np.int32),
+        one_sided=np.array(one_sided, bool),
     )
     camera = pinhole_camera("photo", [0.4, 1.1, 1.6], [-0.3, 1.55, -1.75], width, height, 90.0)
     scene = Scene(mesh=mesh, maps=maps, cameras=[camera])

@@ -174,8 +174,8 @@ def cmd_room_lights(args):
 
 def cmd_room_materials(args):
     from .room_materials import stage
-    from .scene.types import SceneError
     from .room_materials.optimise import Eq4Settings
+    from .scene.types import SceneError
 
     crops = []
     if args.crops:
@@ -186,7 +186,9 @@ def cmd_room_materials(args):
                     text = f.read()
             crops = json.loads(text)
         except (OSError, json.JSONDecodeError) as error:
-            raise SceneError(args.crops, "--crops", f"a JSON list of crop pairs, or a file holding one ({error})") from None
+            raise SceneError(
+                args.crops, "--crops", f"a JSON list of crop pairs, or a file holding one ({error})"
+            ) from None
     stage.run(
         args.capture,
         args.room,
@@ -638,7 +640,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, default=4, help="Eq. 4 alternations (light solve, material steps)")
     p.add_argument("--steps", type=int, default=8, help="Adam steps on the materials per round")
     p.add_argument("--spp", type=int, default=8, help="samples per pixel of a material step")
-    p.add_argument("--light-colour", choices=("grey", "rgb"), default="grey", help="one radiance per light, or per channel")
+    p.add_argument(
+        "--light-colour", choices=("grey", "rgb"), default="grey", help="one radiance per light, or per channel"
+    )
     p.add_argument("--no-retrieval", action="store_true", help="every part homogeneous (no procedural retrieval)")
     p.add_argument("--eval-width", type=int, default=256, help="width of the before/after render the PSNR is taken on")
     p.add_argument("--seed", type=int, default=0, help="render seed")

@@ -54,7 +54,12 @@ class CropPair:
     source: str = "auto"  # "auto" or "user"
 
     def to_json(self) -> dict:
-        return {"part": self.part, "photo": self.photo.to_json(), "render": self.render.to_json(), "source": self.source}
+        return {
+            "part": self.part,
+            "photo": self.photo.to_json(),
+            "render": self.render.to_json(),
+            "source": self.source,
+        }
 
 
 def largest_rectangle(mask: np.ndarray) -> Rect | None:
@@ -134,7 +139,9 @@ def _rect(value, where: str, size: tuple[int, int]) -> Rect:
     except (TypeError, ValueError):
         raise SceneError("config", where, f"[x, y, width, height] in pixels, got {value!r}") from None
     if w < 8 or h < 8 or x < 0 or y < 0 or x + w > size[0] or y + h > size[1]:
-        raise SceneError("config", where, f"a window of at least 8 x 8 pixels inside the {size[0]} x {size[1]} photo, got {value!r}")
+        raise SceneError(
+            "config", where, f"a window of at least 8 x 8 pixels inside the {size[0]} x {size[1]} photo, got {value!r}"
+        )
     return Rect(x, y, w, h)
 
 
@@ -147,7 +154,9 @@ def user_pairs(entries, parts, size: tuple[int, int]) -> list[CropPair]:
         if not isinstance(entry, dict) or "part" not in entry or "photo" not in entry:
             raise SceneError("config", where, f"{{part, photo: [x, y, w, h], render (optional)}}, got {entry!r}")
         if entry["part"] not in parts:
-            raise SceneError("config", f"{where}.part", f"one of the scene's material parts {sorted(parts)}, got {entry['part']!r}")
+            raise SceneError(
+                "config", f"{where}.part", f"one of the scene's material parts {sorted(parts)}, got {entry['part']!r}"
+            )
         photo = _rect(entry["photo"], f"{where}.photo", size)
         render = _rect(entry.get("render", entry["photo"]), f"{where}.render", size)
         out.append(CropPair(entry["part"], photo, render, "user"))

@@ -31,7 +31,9 @@ def crops_figure(pairs, photo_crops, before, after) -> np.ndarray:
         exposure = 0.9 / max(float(np.percentile(p, 95)), 1e-4)
         row = np.concatenate([_tile(p, exposure), _tile(b, exposure), _tile(a, exposure)], axis=1)
         label = np.full((18, row.shape[1], 3), 255, np.uint8)
-        cv2.putText(label, f"{pair.part} ({pair.source})", (3, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(
+            label, f"{pair.part} ({pair.source})", (3, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA
+        )
         rows.append(np.concatenate([label, row], axis=0))
     if not rows:
         return np.full((TILE, 3 * TILE, 3), 255, np.uint8)

@@ -26,7 +26,8 @@ import torch
 
 from ..materials.base import Transform
 from ..materials.fit import fit
-from ..materials.library import PRESETS, preset as library_preset
+from ..materials.library import PRESETS
+from ..materials.library import preset as library_preset
 from ..materials.retrieval import retrieve
 from ..render.renderer import Renderer, pixel_requests
 from .model import PartMaterial, RoomModel

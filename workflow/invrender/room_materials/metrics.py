@@ -71,4 +71,9 @@ def truth_metrics(truth_dir, model, materials, radiance, renderer, camera, eval_
         "emitted_power_estimate": round(float(power_e.sum()), 4),
         "emitted_power_estimate_without_windows": round(float(power_e[~windows].sum()), 4),
     }
-    return {"summary": summary, "parts": per_part, "size": [eval_cam.width, eval_cam.height], "depth_tolerance": DEPTH_TOLERANCE}
+    return {
+        "summary": summary,
+        "parts": per_part,
+        "size": [eval_cam.width, eval_cam.height],
+        "depth_tolerance": DEPTH_TOLERANCE,
+    }

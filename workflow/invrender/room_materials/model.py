@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from ..materials.base import Material, Transform
 from ..materials.bake import _surface_uv
+from ..materials.base import Material, Transform
 from ..materials.library import material as library_material
 from ..scene.atlas import rasterize_atlas
 from ..scene.types import Camera, Maps, Scene
@@ -123,7 +123,9 @@ class RoomModel:
         for i, part in enumerate(parts):
             idx = covered[self.face_part[tri[covered]] == i]
             self.part_texels.append(idx)
-            self.part_xy.append(_surface_uv(position[idx].astype(np.float64), normal[idx].astype(np.float64), part.plane))
+            self.part_xy.append(
+                _surface_uv(position[idx].astype(np.float64), normal[idx].astype(np.float64), part.plane)
+            )
         self.light_texels = [covered[self.face_light[tri[covered]] == j] for j in range(len(lights))]
         self._values: dict = {}
 
@@ -135,7 +137,10 @@ class RoomModel:
 
     @staticmethod
     def _key(mat: PartMaterial) -> tuple:
-        params = tuple((k, tuple(np.ravel(np.asarray(torch.as_tensor(v).detach(), np.float64)))) for k, v in sorted(mat.params.items()))
+        params = tuple(
+            (k, tuple(np.ravel(np.asarray(torch.as_tensor(v).detach(), np.float64))))
+            for k, v in sorted(mat.params.items())
+        )
         t = mat.transform
         return (mat.kind, float(t.scale), t.rotation_deg, tuple(t.offset), mat.meters_per_unit, params)
 
@@ -222,7 +227,9 @@ def scaled_camera(camera: Camera, width: int) -> Camera:
     height = max(1, round(camera.height * k))
     fx, fy, cx, cy = np.asarray(camera.params, float)[:4]
     sy = height / camera.height
-    return Camera(camera.name, "PINHOLE", int(width), height, np.array([fx * k, fy * sy, cx * k, cy * sy]), camera.R, camera.t)
+    return Camera(
+        camera.name, "PINHOLE", int(width), height, np.array([fx * k, fy * sy, cx * k, cy * sy]), camera.R, camera.t
+    )
 
 
 MIN_CROP = 32  # the Gram network's five poolings need at least 2 x 2 features after the fourth

@@ -93,7 +93,11 @@ def make_renderer(model: RoomModel, materials, radiance, device: str | None = No
     from ..scene.types import Scene
 
     bright = [PartMaterial("plain", {"colour": torch.full((3,), 0.9)}) for _ in materials]
-    probe = Scene(mesh=model.scene.mesh, maps=model.maps(bright, np.maximum(np.asarray(radiance, float), 1e-3)), cameras=model.scene.cameras)
+    probe = Scene(
+        mesh=model.scene.mesh,
+        maps=model.maps(bright, np.maximum(np.asarray(radiance, float), 1e-3)),
+        cameras=model.scene.cameras,
+    )
     features = analyse(probe, device=device)
     scene = Scene(mesh=model.scene.mesh, maps=model.maps(materials, radiance), cameras=model.scene.cameras)
     return Renderer(scene, features, device=device)
@@ -201,7 +205,11 @@ class Eq4:
         for mat in materials:
             m = mat.material
             unit = to_unit(m, m.complete({k: torch.as_tensor(v).detach().clone() for k, v in mat.params.items()}))
-            free = {p.name: torch.logit(unit[p.name].clamp(_EDGE, 1 - _EDGE)).requires_grad_(True) for p in m.params if p.texture}
+            free = {
+                p.name: torch.logit(unit[p.name].clamp(_EDGE, 1 - _EDGE)).requires_grad_(True)
+                for p in m.params
+                if p.texture
+            }
             self.logits.append((unit, free))
         params = [z for _, free in self.logits for z in free.values()]
         self.optimizer = torch.optim.Adam(params, lr=settings.learning_rate) if params else None
@@ -235,12 +243,14 @@ class Eq4:
                 mean_terms.append((small[mask].mean(0) - self.medians[i]).abs().mean())
         mean_term = torch.stack(mean_terms).mean() if mean_terms else torch.zeros(())
         gram_terms = [
-            gram_loss(self.net, images[c.camera_index].permute(2, 0, 1)[None], c.target_grams)[0]
-            for c in self.crops
+            gram_loss(self.net, images[c.camera_index].permute(2, 0, 1)[None], c.target_grams)[0] for c in self.crops
         ]
         gram_term = torch.stack(gram_terms).mean() if gram_terms else torch.zeros(())
         total = image_term + s.mean_weight * mean_term + s.gram_weight * gram_term
-        terms = {name: float(t.detach()) for name, t in (("image_l1", image_term), ("mean_colour", mean_term), ("gram", gram_term))}
+        terms = {
+            name: float(t.detach())
+            for name, t in (("image_l1", image_term), ("mean_colour", mean_term), ("gram", gram_term))
+        }
         return total, terms
 
     def render(self, spp: int, seed: int) -> np.ndarray:
@@ -261,7 +271,12 @@ class Eq4:
         self.sync()
         small = self.views.cameras[0]
         unit, variance = light_renders(
-            self.renderer, self.model, self.materials, small, self.settings.light_spp, self.seed + 104729 * (self.step_count + 1)
+            self.renderer,
+            self.model,
+            self.materials,
+            small,
+            self.settings.light_spp,
+            self.seed + 104729 * (self.step_count + 1),
         )
         self.radiance = solve_lights(
             unit, self.targets[0].numpy(), previous=self.radiance, colour=self.settings.light_colour, variance=variance
@@ -312,7 +327,13 @@ class Eq4:
         adjoint = values.grad.numpy()
         if self.optimizer is not None and np.abs(adjoint).max() > 0:
             grads = backward(
-                self.renderer, self.views.cameras, self.views.requests, adjoint, self.settings.spp, backward_seed(seed), maps=("kd",)
+                self.renderer,
+                self.views.cameras,
+                self.views.requests,
+                adjoint,
+                self.settings.spp,
+                backward_seed(seed),
+                maps=("kd",),
             )
             per_part = self.model.gather(grads["kd"])
             self.optimizer.zero_grad()
@@ -323,7 +344,9 @@ class Eq4:
                 if i in evaluated:
                     kd = evaluated[i]
                 else:  # a plain part: one colour, cheap
-                    kd, _, _ = self.model.evaluate(i, PartMaterial(mat.kind, self.current(i), mat.transform, mat.meters_per_unit))
+                    kd, _, _ = self.model.evaluate(
+                        i, PartMaterial(mat.kind, self.current(i), mat.transform, mat.meters_per_unit)
+                    )
                 chained = chained + (kd * torch.from_numpy(per_part[i].astype(np.float32))).sum()
             if torch.is_tensor(chained):
                 chained.backward()
@@ -347,8 +370,15 @@ class Eq4:
                 self.albedo_step()
             if record is None:
                 continue
-            log.info("Eq. 4 round %d: loss %.5f (image %.5f, mean colour %.5f, gram %.4f), %.1f s", r + 1,
-                     record["loss"], record["image_l1"], record["mean_colour"], record["gram"], time.perf_counter() - started)
+            log.info(
+                "Eq. 4 round %d: loss %.5f (image %.5f, mean colour %.5f, gram %.4f), %.1f s",
+                r + 1,
+                record["loss"],
+                record["image_l1"],
+                record["mean_colour"],
+                record["gram"],
+                time.perf_counter() - started,
+            )
         self.light_step()
         self.sync()
         return self.history

@@ -111,15 +111,21 @@ def run(
         doc = _read_json(Path(objects_dir) / "objects.json", "the room_objects stage's objects.json")
         objects = doc["objects"] if isinstance(doc, dict) else doc
         dirs = list(doc.get("asset_dirs", [])) if isinstance(doc, dict) else []
-    lights_doc = _read_json(Path(lights_dir) / "lights.json", "the room_lights stage's lights.json") if lights_dir else {}
+    lights_doc = (
+        _read_json(Path(lights_dir) / "lights.json", "the room_lights stage's lights.json") if lights_dir else {}
+    )
     assets = {a.name: a for a in library(dirs)}
-    scene = assemble_room(room, objects, lights_doc, {}, assets, labels=photo.labels, where=str(Path(room_dir) / "room.json"))
+    scene = assemble_room(
+        room, objects, lights_doc, {}, assets, labels=photo.labels, where=str(Path(room_dir) / "room.json")
+    )
     camera = scene.cameras[0]
     if (camera.width, camera.height) != (photo.width, photo.height):
         raise SceneError(Path(room_dir) / "room.json", "camera", f"the photo's size {photo.width} x {photo.height}")
     parts, lights = from_room_scene(scene, photo.labels, assets)
     if not lights:
-        raise SceneError(Path(lights_dir or room_dir), "lights", "at least one light (the room_lights stage's lights.json)")
+        raise SceneError(
+            Path(lights_dir or room_dir), "lights", "at least one light (the room_lights stage's lights.json)"
+        )
     model = RoomModel(scene, parts, lights)
     radiance = np.stack([light.radiance for light in lights])
     log.info("room_materials: %d parts, %d lights", len(parts), len(lights))
@@ -129,7 +135,9 @@ def run(
     renderer = make_renderer(model, grey, radiance, device=device)
     aov = renderer.aovs([camera], pixel_requests(camera))
     rendered = model.part_ids(aov["triangle_id"].reshape(photo.height, photo.width))
-    radiance = seen_radiance(photo.image, model.light_ids(aov["triangle_id"].reshape(photo.height, photo.width)), radiance, eq4.light_colour)
+    radiance = seen_radiance(
+        photo.image, model.light_ids(aov["triangle_id"].reshape(photo.height, photo.width)), radiance, eq4.light_colour
+    )
     depth = aov["depth"].reshape(photo.height, photo.width)
     photo_masks = _photo_masks(photo, parts)
     inter = [(rendered == i) & photo_masks[i] for i in range(len(parts))]
@@ -157,8 +165,16 @@ def run(
     init_started = time.perf_counter()
     fallback = medians / 0.5  # no pixel at the small size: the median colour under a grey light guess
     albedo, shading = shading_albedo(
-        renderer, model, radiance, small, photo_small, masks_small, np.clip(fallback, 0.01, 0.9),
-        settings.init_spp, settings.init_passes, seed,
+        renderer,
+        model,
+        radiance,
+        small,
+        photo_small,
+        masks_small,
+        np.clip(fallback, 0.01, 0.9),
+        settings.init_spp,
+        settings.init_passes,
+        seed,
     )
     materials = [plain(a) for a in albedo]
 
@@ -175,7 +191,9 @@ def run(
         z = largest.render.cut(depth)
         z = float(np.median(z[z > 0])) if (z > 0).any() else 1.0
         mat, ranking, transform = retrieve_part(crops, albedo[i], largest.render.w * z / fx, settings.fit_steps, net)
-        retrieval[part.name] = {"ranking": {k: round(v, 6) for k, v in sorted(ranking.items(), key=lambda kv: kv[1])[:5]}}
+        retrieval[part.name] = {
+            "ranking": {k: round(v, 6) for k, v in sorted(ranking.items(), key=lambda kv: kv[1])[:5]}
+        }
         if mat is not None:
             materials[i] = mat
             retrieval[part.name]["chosen"] = mat.preset
@@ -187,11 +205,21 @@ def run(
     gram_pairs = [p for p in pairs if materials[part_index[p.part]].kind != "plain"]
     crop_cams = [crop_camera(camera, p.render, settings.crop_size, f"crop{k}") for k, p in enumerate(gram_pairs)]
     targets = [photo_small] + [
-        cv2.resize(p.photo.cut(photo.image), (c.width, c.height), interpolation=cv2.INTER_AREA) for p, c in zip(gram_pairs, crop_cams)
+        cv2.resize(p.photo.cut(photo.image), (c.width, c.height), interpolation=cv2.INTER_AREA)
+        for p, c in zip(gram_pairs, crop_cams)
     ]
     optimiser = Eq4(
-        model, materials, radiance, renderer, Views(small, crop_cams), targets, masks_small, medians,
-        [part_index[p.part] for p in gram_pairs], eq4, seed,
+        model,
+        materials,
+        radiance,
+        renderer,
+        Views(small, crop_cams),
+        targets,
+        masks_small,
+        medians,
+        [part_index[p.part] for p in gram_pairs],
+        eq4,
+        seed,
     )
     figure_cams = [crop_camera(camera, p.render, settings.crop_size, f"fig{k}") for k, p in enumerate(pairs)]
     eval_cam = scaled_camera(camera, min(photo.width, settings.eval_width))
@@ -218,7 +246,9 @@ def run(
     }
     truth_dir = Path(truth_dir) if truth_dir is not None else capture_dir / "truth"
     if (truth_dir / "room.json").exists():
-        metrics["truth"] = truth_metrics(truth_dir, model, optimiser.materials, optimiser.radiance, renderer, camera, eval_cam, parts)
+        metrics["truth"] = truth_metrics(
+            truth_dir, model, optimiser.materials, optimiser.radiance, renderer, camera, eval_cam, parts
+        )
         log.info("room_materials: vs the truth %s", json.dumps(metrics["truth"]["summary"]))
     log.info("room_materials: PSNR %.2f -> %.2f dB", metrics["psnr_before"], metrics["psnr_after"])
 
@@ -229,11 +259,16 @@ def run(
     report |= {
         "settings": asdict(settings) | {"eq4": asdict(eq4), "seed": seed},
         "inputs": {
-            "capture": str(capture_dir), "room": str(Path(room_dir) / "room.json"),
+            "capture": str(capture_dir),
+            "room": str(Path(room_dir) / "room.json"),
             "objects": str(Path(objects_dir) / "objects.json") if objects_dir else None,
             "lights": str(Path(lights_dir) / "lights.json") if lights_dir else None,
         },
-        "seconds": {"init": round(init_seconds, 2), "eq4": round(eq4_seconds, 2), "total": round(time.perf_counter() - started, 2)},
+        "seconds": {
+            "init": round(init_seconds, 2),
+            "eq4": round(eq4_seconds, 2),
+            "total": round(time.perf_counter() - started, 2),
+        },
     }
     photo_crops = [p.photo.cut(photo.image) for p in pairs]
     with atomic_dir(out_dir, kind=KIND) as tmp:
@@ -242,9 +277,13 @@ def run(
         if atlas_sets:
             cut = scene.packing.unpack_atlas(model.maps(optimiser.materials, optimiser.radiance))
             for name in atlas_sets:
-                np.savez_compressed(tmp / "maps" / f"{name}.npz", **{m: getattr(cut[name], m) for m in ("kd", "ks", "ka", "ke", "kw")})
+                np.savez_compressed(
+                    tmp / "maps" / f"{name}.npz", **{m: getattr(cut[name], m) for m in ("kd", "ks", "ka", "ke", "kw")}
+                )
         (tmp / "materials.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n")
-        (tmp / "lights.json").write_text(json.dumps(_lights_json(lights_doc, lights, optimiser.radiance), indent=1) + "\n")
+        (tmp / "lights.json").write_text(
+            json.dumps(_lights_json(lights_doc, lights, optimiser.radiance), indent=1) + "\n"
+        )
         cv2.imwrite(str(tmp / "thumbnails.png"), thumbnails([p.name for p in parts], optimiser.materials))
         cv2.imwrite(str(tmp / "room_materials.png"), crops_figure(pairs, photo_crops, before_crops, after_crops))
     log.info("room_materials: wrote %s in %.1f s", out_dir, report["seconds"]["total"])
@@ -293,8 +332,12 @@ def _report(parts, lights, optimiser, pairs, retrieval, history, metrics, atlas_
         "materials": materials,
         "sets": sets,
         "lights": {
-            light.name: {"kind": light.kind, "radiance": np.round(optimiser.radiance[j], 6).tolist(),
-                         "initial": np.round(light.radiance, 6).tolist(), "seen": np.round(seen[j], 6).tolist()}
+            light.name: {
+                "kind": light.kind,
+                "radiance": np.round(optimiser.radiance[j], 6).tolist(),
+                "initial": np.round(light.radiance, 6).tolist(),
+                "seen": np.round(seen[j], 6).tolist(),
+            }
             for j, light in enumerate(lights)
         },
         "crops": [c.to_json() for c in pairs],
