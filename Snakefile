@@ -31,6 +31,7 @@ include: "workflow/rules/accuracy.smk"
 include: "workflow/rules/room_box.smk"
 include: "workflow/rules/room_lights.smk"
 include: "workflow/rules/room_objects.smk"
+include: "workflow/rules/room_materials.smk"
 
 
 # Trivial steps run where snakemake runs (on a cluster: the login node), not through the queue:

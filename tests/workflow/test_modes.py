@@ -95,6 +95,7 @@ def test_duplicates_and_room_captures_with_only_a_photograph_pass(tmp_path):
         "room_box": 1,
         "room_lights": 1,
         "room_objects": 1,
+        "room_materials": 1,
         "bake_room": 1,  # living's room scene, with features, render and export on it
         "features": 3,
         "render": 3,
@@ -225,7 +226,15 @@ def test_a_synthetic_room_photo_is_a_room_scene_made_by_synthesize(tmp_path):
     """Kind room_photo (the fixture tests/workflow/room_photo.yaml) gives mode room: its capture
     is built by synthesize (no cameras rule: its field of view is in camera.json), then its box."""
     result = snakemake(tmp_path, "-n", "-p", config=TEST_CONFIG.with_name("room_photo.yaml"))
-    room_scene = {"room_objects": 1, "bake_room": 1, "features": 1, "render": 1, "export": 1, "evaluate_room": 1}
+    room_scene = {
+        "room_objects": 1,
+        "room_materials": 1,
+        "bake_room": 1,
+        "features": 1,
+        "render": 1,
+        "export": 1,
+        "evaluate_room": 1,
+    }
     assert job_counts(result.stdout) == {"synthesize": 1, "room_box": 1, "room_lights": 1, **room_scene, "all": 1}
     assert "room-box results/living/capture --out results/living/room_box" in result.stdout
     assert "synthesize room_photo --out results/living/capture" in result.stdout

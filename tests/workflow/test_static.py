@@ -22,11 +22,11 @@ SLURM_PROFILE = REPO / "workflow" / "profiles" / "slurm"
 RULES = {"synthesize", "cameras", "geometry", "gradients", "milo_train", "bake", "bake_duplicates"}
 RULES |= {"segment", "duplicates", "duplicates_material", "features", "render", "export", "evaluate"}
 RULES |= {"evaluate_duplicates", "edit", "recovery_run", "accuracy", "summary", "room_box", "room_lights"}
-RULES |= {"bake_room", "evaluate_room", "room_objects"}
+RULES |= {"bake_room", "evaluate_room", "room_objects", "room_materials"}
 CHECKPOINT_RULES = {"duplicates_crop"}
 RAY_TRACING_RULES = {"synthesize", "features", "render", "gradients", "milo_train", "duplicates_material"}
 RAY_TRACING_RULES |= {"evaluate", "evaluate_duplicates", "edit", "recovery_run", "accuracy", "room_lights"}
-RAY_TRACING_RULES |= {"evaluate_room", "room_objects"}
+RAY_TRACING_RULES |= {"evaluate_room", "room_objects", "room_materials"}
 
 
 def test_lint_is_clean(tmp_path):
@@ -62,10 +62,10 @@ def test_python_follows_ruff(command):
 def test_dry_run_of_the_demo(tmp_path):
     result = snakemake(tmp_path, "-n", config=DEMO_CONFIG)
     # the demo's recovery sweep is the schema's quick one: 4 MILO runs and 3 of the material stage;
-    # its third scene, the living room photo, is synthesized and gets its room box, lights and objects
-    # and its room scene (bake_room), with features, render and export on it, scored (evaluate_room)
+    # its third scene, the living room photo, is synthesized and gets its room box, lights, objects
+    # and materials and its room scene (bake_room), with features, render and export on it, scored
     expected = FULL_RUN_JOBS | {"recovery_run": 7, "room_box": 1, "room_lights": 1, "room_objects": 1}
-    expected |= {"bake_room": 1, "evaluate_room": 1}
+    expected |= {"room_materials": 1, "bake_room": 1, "evaluate_room": 1}
     for rule in ("synthesize", "features", "render", "export"):
         expected[rule] = FULL_RUN_JOBS[rule] + 1
     assert job_counts(result.stdout) == expected
@@ -164,7 +164,7 @@ BAD_CONFIGS = {
         {"render": {"spp": 4}, "scene": {}},
         [
             "config: scene: unknown key; allowed: device, scenes, geometry, duplicates, features, gradients, render, "
-            "room_objects, duplicates_material, milo, evaluate, accuracy, edit, export, bake_room"
+            "room_objects, duplicates_material, milo, evaluate, accuracy, edit, export, bake_room, room_materials"
         ],
     ),
     "typo in a scene": (

@@ -192,6 +192,39 @@ def cmd_room_objects(args):
     )
 
 
+def cmd_room_materials(args):
+    from .room_materials import stage
+    from .room_materials.optimise import Eq4Settings
+    from .scene.types import SceneError
+
+    crops = []
+    if args.crops:
+        text = args.crops
+        try:
+            if not text.lstrip().startswith("["):
+                with open(text) as f:
+                    text = f.read()
+            crops = json.loads(text)
+        except (OSError, json.JSONDecodeError) as error:
+            raise SceneError(
+                args.crops, "--crops", f"a JSON list of crop pairs, or a file holding one ({error})"
+            ) from None
+    stage.run(
+        args.capture,
+        args.room,
+        args.out,
+        objects_dir=args.objects,
+        lights_dir=args.lights,
+        settings=stage.MaterialSettings(retrieve=not args.no_retrieval, eval_width=args.eval_width),
+        eq4=Eq4Settings(rounds=args.rounds, steps=args.steps, spp=args.spp, light_colour=args.light_colour),
+        user_crops=crops,
+        truth_dir=args.truth,
+        files={name: getattr(args, name) for name in ("photo", "ids", "labels") if getattr(args, name)},
+        seed=args.seed,
+        device=args.device,
+    )
+
+
 def cmd_gradients(args):
     from .gradients import stage
 
@@ -655,6 +688,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="render seed")
     p.add_argument("--device", help="OpenCL device for the refinement's renders (default: a GPU, else PoCL)")
     p.set_defaults(func=cmd_room_objects)
+
+    p = stages.add_parser(
+        "room-materials", help="the room's materials and light radiances by Eq. 4 -> materials.json, figures"
+    )
+    p.add_argument("capture", help="room capture directory (photo, panoptic.png/json)")
+    p.add_argument("--room", required=True, help="the room_box stage's output directory (room.json)")
+    p.add_argument("--lights", required=True, help="the room_lights stage's output directory (lights.json)")
+    p.add_argument("--objects", help="the room_objects stage's output directory (objects.json); none: an empty room")
+    p.add_argument("--out", required=True, help="directory to write (materials.json, lights.json, figures)")
+    for name, what in (("photo", "photograph"), ("ids", "segment id PNG"), ("labels", "label table")):
+        p.add_argument(f"--{name}", help=f"the {what}, relative to the capture (default: its standard name)")
+    p.add_argument("--crops", help="user crop pairs, JSON text or a file: [{part, photo: [x, y, w, h], render: [...]}]")
+    p.add_argument("--truth", help="a synthetic room's truth directory (default: CAPTURE/truth when present)")
+    p.add_argument("--rounds", type=int, default=4, help="Eq. 4 alternations (light solve, material steps)")
+    p.add_argument("--steps", type=int, default=8, help="Adam steps on the materials per round")
+    p.add_argument("--spp", type=int, default=8, help="samples per pixel of a material step")
+    p.add_argument(
+        "--light-colour", choices=("grey", "rgb"), default="grey", help="one radiance per light, or per channel"
+    )
+    p.add_argument("--no-retrieval", action="store_true", help="every part homogeneous (no procedural retrieval)")
+    p.add_argument("--eval-width", type=int, default=256, help="width of the before/after render the PSNR is taken on")
+    p.add_argument("--seed", type=int, default=0, help="render seed")
+    p.add_argument("--device", help="OpenCL device (default: a GPU, else PoCL)")
+    p.set_defaults(func=cmd_room_materials)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")
     p.add_argument("--geometry", required=True, help="geometry stage output (mesh.ply with UVs, atlas.npz)")

@@ -1271,3 +1271,42 @@ def room_objects_options(wildcards):
         options.append(f"--{key.replace('_', '-')} {settings[key]}")
     options += [f"--asset-dir {shlex.quote(d)}" for d in settings["asset_dirs"]]
     return " ".join(options)
+
+
+# ---------------------------------------------------------------------------- room materials
+# (the input functions of workflow/rules/room_materials.smk)
+
+
+def room_materials_inputs(wildcards):
+    results = f"results/{wildcards.scene}"
+    inputs = {
+        "capture": room_box_input(wildcards),
+        "room": f"{results}/room_box",
+        "lights": f"{results}/room_lights",
+    }
+    if "room_objects" in room_stages_present():
+        inputs["objects"] = f"{results}/room_objects"
+    return inputs
+
+
+def room_materials_options(wildcards):
+    """--objects when room_objects exists, the capture's named files, the config's settings,
+    and the scene's user crop pairs (as JSON text)."""
+    results = f"results/{wildcards.scene}"
+    settings = config.get("room_materials", {})
+    options = [room_lights_options(wildcards)]
+    if "room_objects" in room_stages_present():
+        options.append(f"--objects {results}/room_objects")
+    options += [
+        f"--rounds {settings.get('rounds', 4)}",
+        f"--steps {settings.get('steps', 8)}",
+        f"--spp {settings.get('spp', 8)}",
+        f"--light-colour {settings.get('light_colour', 'grey')}",
+        f"--eval-width {settings.get('eval_width', 256)}",
+    ]
+    if not settings.get("retrieval", True):
+        options.append("--no-retrieval")
+    crops = SCENES[wildcards.scene].get("room_materials", {}).get("crops", [])
+    if crops:
+        options.append(f"--crops {shlex.quote(json.dumps(crops))}")
+    return " ".join(option for option in options if option)
