@@ -90,7 +90,7 @@ def test_window_quad_from_its_pixels_and_lamps_marked():
     points = camera.center + pixel_directions(camera) * depth[..., None]
     window = (np.abs(points[..., 0]) < 1.0) & (np.abs(points[..., 1] - 1.5) < 0.5) & (points[..., 2] < -2.99)
     segments = np.where(window, 1, 0)
-    segments[:5, :5] = 2  # a lamp's pixels
+    segments[-5:, :5] = 2  # a lamp's pixels, on the floor: an object's (room_objects places it)
     quads, lamps = window_lights(
         BOX, camera, segments, {1: ("window", "window_0"), 2: ("lamp", "lamp_a"), 3: ("wall", "w")}
     )
@@ -101,3 +101,25 @@ def test_window_quad_from_its_pixels_and_lamps_marked():
     pixel = 5.5 / 80 * (2.5 + 3.0) * np.tan(np.radians(30))  # about one pixel's footprint on the wall
     np.testing.assert_allclose(q.center, [0, 1.5, -3.0], atol=pixel)
     np.testing.assert_allclose(sorted(np.abs(q.e1 + q.e2))[1:], [1.0, 2.0], atol=2 * pixel)
+
+
+def test_a_lamp_on_the_ceiling_is_a_panel_of_its_pixels_footprint():
+    """A lamp segment whose rays hit the ceiling (a flush panel: no asset for room_objects) becomes
+    an emissive quad on the ceiling: its footprint from the pixels, just below the ceiling."""
+    camera = pinhole_camera("photo", [0.0, 1.5, 2.5], [0.0, 2.0, -2.5], 160, 120, 60.0)
+    face, depth = cast_box(BOX, camera)
+    points = camera.center + pixel_directions(camera) * depth[..., None]
+    panel = (np.abs(points[..., 0] - 0.5) < 0.4) & (np.abs(points[..., 2] + 1.0) < 0.6) & (points[..., 1] > 2.99)
+    assert panel.sum() > 50
+    quads, lamps = window_lights(BOX, camera, np.where(panel, 7, 0), {7: ("lamp", "panel")}, inset=1e-3)
+    assert lamps == []
+    (q,) = quads
+    assert q.kind == "lamp" and q.name == "panel"
+    np.testing.assert_allclose(q.normal, [0, -1, 0], atol=1e-12)
+    # the truth: the bounding rectangle of the panel's points seen (cast_box, the room box's own
+    # ray caster), within about a pixel's footprint there
+    seen = points[panel]
+    pixel = 2 * np.tan(np.radians(30)) / 160 * np.linalg.norm(seen.mean(0) - camera.center)
+    lo, hi = seen.min(0), seen.max(0)
+    np.testing.assert_allclose(q.center, [(lo[0] + hi[0]) / 2, 3.0 - 3e-3, (lo[2] + hi[2]) / 2], atol=pixel)
+    np.testing.assert_allclose(np.abs(q.e1 + q.e2)[[0, 2]], (hi - lo)[[0, 2]], atol=2 * pixel)

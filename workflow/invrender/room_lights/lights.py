@@ -47,7 +47,7 @@ class Quad:
     e1: np.ndarray  # (3,) full edge
     e2: np.ndarray  # (3,) full edge
     normal: np.ndarray  # (3,) unit, into the room
-    kind: str  # "ceiling" | "camera" | "wall" | "window"
+    kind: str  # "ceiling" | "camera" | "wall" | "window" | "lamp"
     name: str = ""
 
     def corners(self) -> np.ndarray:
@@ -244,36 +244,56 @@ def _wall_hits(wall: Quad, origin: np.ndarray, directions: np.ndarray) -> tuple[
     return pu[inside], pv[inside]
 
 
-def window_lights(box, camera: Camera, segments: np.ndarray, labels: dict) -> tuple[list[Quad], list[dict]]:
-    """Visible windows as emissive quads and lamps as emissive segments. A window segment's
-    pixels' rays are cast onto the walls; the quad is the bounding rectangle, in the wall most
-    of them hit, of their hit points. ``segments``: (H, W) ids at the camera's size; ``labels``: id ->
-    (class, name). Lamps are objects the object stage places, so they are returned as
-    {"segment", "name"} marks only."""
+def ceiling_quad(box) -> Quad:
+    """The whole ceiling as a quad, its normal down into the room."""
+    R = _frame(box)
+    sx, sy, sz = _size(box)
+    return Quad(
+        R @ np.array([0.0, sy / 2, 0.0]) + _center(box), R[:, 0] * sx, R[:, 2] * sz, -R[:, 1], "ceiling", "ceiling"
+    )
+
+
+def _footprint(quad: Quad, pu: np.ndarray, pv: np.ndarray, kind: str, name: str, inset: float = 0.0) -> Quad:
+    """The bounding rectangle of hit points (pu, pv) on ``quad``, moved ``inset`` into the room."""
+    u, v = quad.e1 / np.linalg.norm(quad.e1), quad.e2 / np.linalg.norm(quad.e2)
+    lo, hi = np.array([pu.min(), pv.min()]), np.array([pu.max(), pv.max()])
+    mid = (lo + hi) / 2
+    center = quad.center + u * mid[0] + v * mid[1] + quad.normal * inset
+    return Quad(center, u * (hi[0] - lo[0]), v * (hi[1] - lo[1]), quad.normal, kind, name)
+
+
+def window_lights(
+    box, camera: Camera, segments: np.ndarray, labels: dict, inset: float = 1e-3
+) -> tuple[list[Quad], list[dict]]:
+    """Visible windows and ceiling lamps as emissive quads, other lamps as emissive segments. A
+    window segment's pixels' rays are cast onto the walls; the quad is the bounding rectangle, in
+    the wall most of them hit, of their hit points. A lamp segment most of whose rays hit the
+    ceiling is a ceiling panel: its quad is found the same way on the ceiling, ``inset`` times the
+    box's height below it (room_objects leaves such lamps to this stage: no asset is a light flush
+    with the ceiling). Any other lamp is an object the object stage places, returned as a
+    {"segment", "name"} mark. ``segments``: (H, W) ids at the camera's size; ``labels``: id ->
+    (class, name)."""
     rays = pixel_directions(camera)
-    walls = wall_quads(box)
+    walls, ceiling = wall_quads(box), ceiling_quad(box)
     quads, lamps = [], []
     for sid, (cls, name) in sorted(labels.items()):
-        if cls == "lamp":
-            lamps.append({"segment": int(sid), "name": name or f"lamp_{sid}"})
-            continue
-        if cls != "window":
+        if cls not in ("window", "lamp"):
             continue
         directions = rays[segments == sid]
+        if cls == "lamp":
+            pu, pv = _wall_hits(ceiling, camera.center, directions)
+            if len(pu) > len(directions) / 2:
+                quads.append(_footprint(ceiling, pu, pv, "lamp", name or f"lamp_{sid}", inset * _size(box)[1]))
+            else:
+                lamps.append({"segment": int(sid), "name": name or f"lamp_{sid}"})
+            continue
         # The wall the window is on: the one most of its pixels' rays hit (a window's pixels
         # straddling a corner keep to the wall of their majority).
         hits = [_wall_hits(wall, camera.center, directions) for wall in walls]
         best = int(np.argmax([len(h[0]) for h in hits]))
         (pu, pv), wall = hits[best], walls[best]
-        if len(pu) == 0:
-            continue
-        u, v = wall.e1 / np.linalg.norm(wall.e1), wall.e2 / np.linalg.norm(wall.e2)
-        lo, hi = np.array([pu.min(), pv.min()]), np.array([pu.max(), pv.max()])
-        mid = (lo + hi) / 2
-        center = wall.center + u * mid[0] + v * mid[1]
-        quads.append(
-            Quad(center, u * (hi[0] - lo[0]), v * (hi[1] - lo[1]), wall.normal, "window", name or f"window_{sid}")
-        )
+        if len(pu):
+            quads.append(_footprint(wall, pu, pv, "window", name or f"window_{sid}"))
     return quads, lamps
 
 
@@ -309,6 +329,6 @@ def initial_lights(
     lights += invisible_wall_lights(box, camera, s.window_size, s.inset)
     lamps = []
     if segments is not None and labels:
-        windows, lamps = window_lights(box, camera, segments, labels)
+        windows, lamps = window_lights(box, camera, segments, labels, s.inset)
         lights += windows
     return LightSet(lights, lamps, {"in_frustum": seen, "behind_camera": behind})
