@@ -285,17 +285,11 @@ def _object_atlas(obj_name, asset, mesh, shape, part, materials, emission, where
     for key in ("kd", "ks", "ka", "ke", "kw"):
         table = np.stack([np.reshape(c[key], -1) for c in per_part])  # (parts, channels)
         shade = lambda tri, pos, nrm, table=table: table[part[tri]]  # noqa: E731
-        maps[key] = bake(texels, shade, table.shape[1], dilation=4, background=0.0)
-        if key in ("kd", "ks", "ka"):  # texels no chart reaches: the first part's value, never 0 roughness
-            empty = ~_grown(texels.mask, 4)
-            maps[key][empty] = table[0] if table.shape[1] > 1 else table[0, 0]
+        # texels no chart reaches (nor its 4-texel dilation) are never read; they hold the first
+        # part's value, not 0, which the format refuses as a roughness
+        background = float(table[0].mean()) if key in ("kd", "ks", "ka") else 0.0
+        maps[key] = bake(texels, shade, table.shape[1], dilation=4, background=background)
     return Atlas(**maps)
-
-
-def _grown(mask: np.ndarray, iterations: int) -> np.ndarray:
-    from .atlas import dilate
-
-    return dilate(np.zeros(mask.shape, np.float32), mask, iterations)[1]
 
 
 # ---------------------------------------------------------------------------- lights
@@ -379,6 +373,75 @@ def truth_lights(truth: Mapping) -> dict:
 # ---------------------------------------------------------------------------- the scene
 
 
+@dataclass
+class _Room:
+    """The scene being assembled: its objects, their sets, the instances table, the metadata."""
+
+    where: str
+    objects: list = field(default_factory=list)
+    sets: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=lambda: {"surfaces": {}, "parts": {}, "instances": []})
+
+    def add(self, name, mesh, atlas, cls, kind, segment=None, transform=None, sides="two", **extra) -> None:
+        """One object, its own set of the same name, the next instance id."""
+        if name in self.sets:
+            raise SceneError(self.where, "name", f"a name no other object of the room has, got {name!r} twice")
+        iid = len(self.objects) + 1
+        T = np.eye(4) if transform is None else transform
+        self.objects.append(SceneObject(name, mesh, name, T, iid, sides))
+        self.sets[name] = atlas
+        self.metadata["instances"].append(
+            {"instance_id": iid, "name": name, "class": cls, "kind": kind, "segment": segment, **extra}
+        )
+
+
+def _add_box(out: _Room, room: Mapping, materials: Mapping, texels_per_meter: float) -> None:
+    """The six faces, each texels_per_meter along both edges, and their planes in the metadata."""
+    for s in box_surfaces(room, out.where):
+        width, height = float(np.linalg.norm(s["e1"])), float(np.linalg.norm(s["e2"]))
+        shape = (_texels(height, texels_per_meter), _texels(width, texels_per_meter))
+        atlas = _given(materials, [s["name"], s["light_name"], s["class"]], shape, out.where)
+        atlas = atlas or _uniform(DEFAULT_MATERIAL, shape, out.where)
+        out.add(s["name"], _quad_mesh(s["center"], s["e1"], s["e2"], s["normal"]), atlas, s["class"], "box")
+        out.metadata["surfaces"][s["name"]] = {
+            "origin": (s["center"] - s["e1"] / 2 - s["e2"] / 2).tolist(),
+            "u_axis": (s["e1"] / width).tolist(),
+            "v_axis": (s["e2"] / height).tolist(),
+            "size": [width, height],
+        }
+
+
+def _add_objects(out, objects, table, materials, lamp_radiance, labels, texels_per_meter) -> None:
+    """Each placed asset: its unit mesh unwrapped at its placed size, its set, its class."""
+    for k, obj in enumerate(objects):
+        field_ = f"objects[{k}]"
+        if obj.get("asset") not in table:
+            raise SceneError(out.where, f"{field_}.asset", f"an asset of the library, got {obj.get('asset')!r}")
+        asset = table[obj["asset"]]
+        T = object_transform_of(obj, f"{out.where}: {field_}")
+        segment = None if obj.get("segment") is None else int(obj["segment"])
+        name = safe_name(obj.get("name") or f"object_{segment if segment is not None else k}")
+        mesh, shape, part, ranges = _object_mesh(asset, float(np.cbrt(np.linalg.det(T[:3, :3]))), texels_per_meter)
+        atlas = _object_atlas(name, asset, mesh, shape, part, materials, lamp_radiance.get(segment), out.where)
+        cls = labels[segment][0] if segment in labels else ("lamp" if segment in lamp_radiance else "object")
+        if cls not in ROOM_CLASSES:
+            raise SceneError(out.where, f"labels[{segment}]", f"one of {', '.join(ROOM_CLASSES)}, got {cls!r}")
+        out.add(name, mesh, atlas, cls, "object", segment, T, asset=asset.name)
+        out.metadata["parts"][name] = ranges
+
+
+def _add_lights(out: _Room, lights: Mapping, offset: float) -> None:
+    """Each light a one-sided emitting quad ``offset`` off its wall or ceiling, a 2 x 2 set."""
+    for q in _light_quads(lights, out.where):
+        name = safe_name(f"light_{q['name']}")
+        while name in out.sets:
+            name += "_"
+        atlas = _uniform({"kd": 0.0, "ks": 0.0, "ka": 1.0, "ke": q["radiance"]}, (LIGHT_ATLAS, LIGHT_ATLAS), out.where)
+        mesh = _quad_mesh(q["center"] + q["normal"] * offset, q["e1"], q["e2"], q["normal"])
+        cls = "window" if q["kind"] == "window" else "lamp"
+        out.add(name, mesh, atlas, cls, "light", q["segment"], sides="one")
+
+
 def assemble_room(
     room: Mapping,
     objects: Iterable[Mapping] = (),
@@ -395,75 +458,16 @@ def assemble_room(
     """The room scene (module docstring). ``labels``: the photo's segment id -> (class, name)
     (``RoomPhoto.labels``), which names each object's class; without it an object whose segment
     lights.json lists as a lamp is a ``lamp``, any other an ``object``."""
-    materials = dict(materials or {})
-    lights = dict(lights or {})
-    labels = dict(labels or {})
-    table = _asset_table(assets)
-    center, size, _ = _box(room, where)
+    materials, lights, labels = dict(materials or {}), dict(lights or {}), dict(labels or {})
+    _, size, _ = _box(room, where)
     camera = room_camera(room, where)
-    scene_objects, sets, instances = [], {}, []
-    metadata = {"surfaces": {}, "parts": {}, "instances": instances, "box": room["box"]}
-
-    def add(obj_name, mesh, atlas, cls, kind, segment=None, transform=None, sides="two", **extra):
-        if obj_name in sets:
-            raise SceneError(where, "name", f"a name no other object of the room has, got {obj_name!r} twice")
-        iid = len(scene_objects) + 1
-        scene_objects.append(
-            SceneObject(obj_name, mesh, obj_name, np.eye(4) if transform is None else transform, iid, sides)
-        )
-        sets[obj_name] = atlas
-        instances.append(
-            {"instance_id": iid, "name": obj_name, "class": cls, "kind": kind, "segment": segment, **extra}
-        )
-
-    for s in box_surfaces(room, where):
-        shape = (_texels(np.linalg.norm(s["e2"]), texels_per_meter), _texels(np.linalg.norm(s["e1"]), texels_per_meter))
-        atlas = _given(materials, [s["name"], s["light_name"], s["class"]], shape, where) or _uniform(
-            DEFAULT_MATERIAL, shape, where
-        )
-        add(s["name"], _quad_mesh(s["center"], s["e1"], s["e2"], s["normal"]), atlas, s["class"], "box")
-        corner = s["center"] - s["e1"] / 2 - s["e2"] / 2
-        metadata["surfaces"][s["name"]] = {
-            "origin": corner.tolist(),
-            "u_axis": (s["e1"] / np.linalg.norm(s["e1"])).tolist(),
-            "v_axis": (s["e2"] / np.linalg.norm(s["e2"])).tolist(),
-            "size": [float(np.linalg.norm(s["e1"])), float(np.linalg.norm(s["e2"]))],
-        }
-
-    lamp_radiance = {
-        int(lamp["segment"]): lamp.get("radiance") for lamp in lights.get("lamps", []) if "segment" in lamp
-    }
-    for k, obj in enumerate(objects):
-        field_ = f"objects[{k}]"
-        if obj.get("asset") not in table:
-            raise SceneError(where, f"{field_}.asset", f"an asset of the library, got {obj.get('asset')!r}")
-        asset = table[obj["asset"]]
-        T = object_transform_of(obj, f"{where}: {field_}")
-        scale = float(np.cbrt(np.linalg.det(T[:3, :3])))
-        segment = obj.get("segment")
-        segment = int(segment) if segment is not None else None
-        obj_name = safe_name(obj.get("name") or f"object_{segment if segment is not None else k}")
-        mesh, shape, part, ranges = _object_mesh(asset, scale, texels_per_meter)
-        emission = lamp_radiance.get(segment) if segment is not None else None
-        atlas = _object_atlas(obj_name, asset, mesh, shape, part, materials, emission, where)
-        cls = labels[segment][0] if segment in labels else ("lamp" if segment in lamp_radiance else "object")
-        if cls not in ROOM_CLASSES:
-            raise SceneError(where, f"labels[{segment}]", f"one of {', '.join(ROOM_CLASSES)}, got {cls!r}")
-        add(obj_name, mesh, atlas, cls, "object", segment, T, asset=asset.name)
-        metadata["parts"][obj_name] = ranges
-
-    offset = inset * size[1]
-    for q in _light_quads(lights, where):
-        name = safe_name(f"light_{q['name']}")
-        while name in sets:
-            name += "_"
-        desc = {"kd": 0.0, "ks": 0.0, "ka": 1.0, "ke": q["radiance"]}
-        mesh = _quad_mesh(q["center"] + q["normal"] * offset, q["e1"], q["e2"], q["normal"])
-        cls = "window" if q["kind"] == "window" else "lamp"
-        add(name, mesh, _uniform(desc, (LIGHT_ATLAS, LIGHT_ATLAS), where), cls, "light", q["segment"], sides="one")
-
+    out = _Room(where)
+    out.metadata["box"] = room["box"]
+    lamps = {int(lamp["segment"]): lamp.get("radiance") for lamp in lights.get("lamps", []) if "segment" in lamp}
+    _add_box(out, room, materials, texels_per_meter)
+    _add_objects(out, objects, _asset_table(assets), materials, lamps, labels, texels_per_meter)
+    _add_lights(out, lights, inset * size[1])
     kg = np.zeros((6, 8, 8, 3), np.float32) if kg is None else np.asarray(kg, np.float32)
-    scene = pack_scene(scene_objects, sets, kg, [camera])
-    return RoomScene(
-        **{f: getattr(scene, f) for f in ("mesh", "maps", "cameras", "path", "objects", "packing")}, metadata=metadata
-    )
+    scene = pack_scene(out.objects, out.sets, kg, [camera])
+    fields = ("mesh", "maps", "cameras", "path", "objects", "packing")
+    return RoomScene(**{f: getattr(scene, f) for f in fields}, metadata=out.metadata)
