@@ -111,7 +111,8 @@ def test_the_grounds_gradient_reaches_the_sky_above_through_the_irradiance():
     rng = np.random.default_rng(0)
     kg = rng.uniform(0.2, 3.0, (6, n, n, 3)).astype(np.float32)
     atlas = Atlas.uniform((4, 4), kd=0.5, ks=0.04, ka=0.1)
-    material = TexelMaterial({"object": atlas}, kg, {"object": np.zeros((0, 2), np.int64)}, sky_neighbour_pairs(n), ground)
+    no_pairs = {"object": np.zeros((0, 2), np.int64)}
+    material = TexelMaterial({"object": atlas}, kg, no_pairs, sky_neighbour_pairs(n), ground)
     material.kg()[torch.from_numpy(ground.below)].sum().backward()
     grad = material.sky.grad.numpy()
     expected = ground.below.sum() * 0.18 / np.pi * ground.weights[..., None] * kg
