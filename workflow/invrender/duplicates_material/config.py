@@ -12,12 +12,20 @@ from ..scene.types import SceneError
 
 SUPPORTS = ("plane", "none")
 STARTS = ("photograph", "grey")
+GROUNDS = ("lit", "free")
 
 _COMMON = {
     # The scene
     "support": "plane",  # the table or floor as its own quad and material (support.py), or none
     "support_resolution": 128,  # texels along the support atlas' longer side
     "sky_resolution": 8,  # N of the recovered 6 x N x N kg
+    # the sky below the support's horizon, which no pixel sees: "lit" (material.Ground: the light a
+    # grey ground of albedo ground_albedo reflects under the recovered sky above it) or "free" (its
+    # texels keep their start, the support's median radiance in the photograph)
+    "ground": "lit",
+    # 0.18: photography's middle grey, the average reflectance of a scene (a prior, not a measurement;
+    # not fitted to the fixtures: docs/duplicates-material.md has 0.1 and 0.3 beside it)
+    "ground_albedo": 0.18,
     # where the maps start: "photograph" (scene/first_guess.py: each texel's colour in the
     # photograph, under a white sky, what bake shows before this stage) or "grey" (kd 0.5 everywhere)
     "start": "photograph",
@@ -101,6 +109,10 @@ def _check(s: dict, where: str) -> None:
         raise SceneError(where, "support", f"one of {', '.join(SUPPORTS)}, got {s['support']!r}")
     if s["start"] not in STARTS:
         raise SceneError(where, "start", f"one of {', '.join(STARTS)}, got {s['start']!r}")
+    if s["ground"] not in GROUNDS:
+        raise SceneError(where, "ground", f"one of {', '.join(GROUNDS)}, got {s['ground']!r}")
+    if not 0 <= s["ground_albedo"] <= 1:
+        raise SceneError(where, "ground_albedo", f"an albedo in [0, 1], got {s['ground_albedo']}")
     if not 0 < s["object_share"] <= 1:
         raise SceneError(where, "object_share", f"a fraction in (0, 1], got {s['object_share']}")
     for key in ("smoothness", "binary", "sparsity", "energy", "sky_smoothness"):

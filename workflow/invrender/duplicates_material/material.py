@@ -15,6 +15,8 @@ as a covered one, so it is a parameter like any other.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -69,11 +71,41 @@ def sky_neighbour_pairs(n: int, below: np.ndarray | None = None, k: int = SKY_NE
     return np.unique(np.sort(pairs, 1), axis=0)
 
 
-class TexelMaterial(torch.nn.Module):
-    """The unconstrained arrays of every material set and of the sky."""
+@dataclass(frozen=True)
+class Ground:
+    """The sky below the support's horizon as the light a ground of ``albedo`` (Lambertian, grey)
+    reflects under the sky above it: kg = albedo E / pi, E = sum(weights kg) the irradiance on the
+    support's plane (support.irradiance_weights). No pixel sees that half of the sphere (the
+    support hides it from every copy), so a prior sets it; this one stays in step with the sky
+    the copies do constrain, and its gradient (the few rays that pass the support's edge) reaches
+    that sky through E."""
 
-    def __init__(self, start: dict[str, Atlas], kg: np.ndarray, pairs: dict[str, np.ndarray], sky_pairs: np.ndarray):
+    below: np.ndarray  # (6, n, n) bool
+    weights: np.ndarray  # (6, n, n)
+    albedo: float
+
+    def radiance(self, sky: torch.Tensor) -> torch.Tensor:
+        """The sky (6, n, n, 3) with the ground put below the horizon."""
+        weights = torch.from_numpy(np.asarray(self.weights, np.float32))
+        irradiance = (sky * weights[..., None]).sum((0, 1, 2))
+        ground = (self.albedo / np.pi) * irradiance
+        return torch.where(torch.from_numpy(np.asarray(self.below))[..., None], ground, sky)
+
+
+class TexelMaterial(torch.nn.Module):
+    """The unconstrained arrays of every material set and of the sky (and the ground's rule, if any:
+    its texels' own values are then unused)."""
+
+    def __init__(
+        self,
+        start: dict[str, Atlas],
+        kg: np.ndarray,
+        pairs: dict[str, np.ndarray],
+        sky_pairs: np.ndarray,
+        ground: Ground | None = None,
+    ):
         super().__init__()
+        self.ground = ground  # not a buffer: checkpoints hold the same state with and without it
         self.names = list(start)
         self.pairs = {name: torch.from_numpy(p) for name, p in pairs.items()}
         self.sky_pairs = torch.from_numpy(sky_pairs)
@@ -95,7 +127,8 @@ class TexelMaterial(torch.nn.Module):
         }
 
     def kg(self) -> torch.Tensor:
-        return torch.exp(torch.clamp(self.sky, max=SKY_LOG_LIMIT))
+        sky = torch.exp(torch.clamp(self.sky, max=SKY_LOG_LIMIT))
+        return sky if self.ground is None else self.ground.radiance(sky)
 
     @torch.no_grad()
     def atlases(self) -> dict[str, Atlas]:

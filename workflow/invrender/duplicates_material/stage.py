@@ -39,9 +39,9 @@ from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
 from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
-from .material import F0, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
+from .material import F0, Ground, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
 from .rays import SUPPORT_ID, pixel_pools
-from .support import below_horizon, first_sky, support_mesh, support_object, support_texels
+from .support import below_horizon, first_sky, irradiance_weights, support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training
 
 log = logging.getLogger(__name__)
@@ -103,6 +103,14 @@ def check_coverage(masks: list, registered: set[int], masks_path) -> None:
             )
 
 
+def _ground(settings: dict, n: int, support, below) -> Ground | None:
+    """The rule for the sky below the support's horizon (config.py "ground"), None to leave those
+    texels free (then they keep their start: no gradient reaches them)."""
+    if support is None or settings["ground"] != "lit":
+        return None
+    return Ground(below, irradiance_weights(n, support[0]), settings["ground_albedo"])
+
+
 def run(
     geometry_dir,
     poses_path,
@@ -135,6 +143,9 @@ def run(
     pairs = {"object": neighbour_pairs(texels, settings["smoothness_radius"])}
     if support is not None:
         pairs["support"] = neighbour_pairs(support[1], settings["smoothness_radius"])
+    ground, sky_pairs = _ground(settings, n, support, below), sky_neighbour_pairs(n, below)
+    if ground is not None:  # the ground's texels follow the sky: no prior among them
+        sky_pairs = sky_pairs[~below.reshape(-1)[sky_pairs].any(1)]
 
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(1)  # torch's OpenMP workers would spin beside PoCL's (milo/stage.py measured it)
@@ -142,7 +153,7 @@ def run(
     median = float(max(np.median(pixels @ LUMINANCE), 1e-3))
     training = Training(
         settings,
-        TexelMaterial(materials, kg, pairs, sky_neighbour_pairs(n, below)),
+        TexelMaterial(materials, kg, pairs, sky_pairs, ground),
         renderer,
         scene.packing,
         cameras,

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.atlas import AtlasTexels, rasterize_atlas
-from ..scene.cubemap import texel_directions
+from ..scene.cubemap import cube_texel_solid_angles, texel_directions
 from ..scene.types import Camera, Mesh, SceneObject
 
 CONTACT_TOLERANCE = 1e-3  # fraction of the object's size: vertices this close to the lowest count as contact
@@ -119,14 +119,25 @@ def support_object(mesh: Mesh) -> SceneObject:
     return SceneObject("support", mesh, "support", np.eye(4), instance_id=0)
 
 
+def _facing(n: int, support: Mesh) -> np.ndarray:
+    """(6, n, n): the cosine between each sky texel's direction and the support's normal."""
+    a, b, c = support.positions[support.faces[0]].astype(np.float64)
+    normal = np.cross(b - a, c - a)  # the quad faces +normal (_basis)
+    return texel_directions(n) @ (normal / np.linalg.norm(normal))
+
+
 def below_horizon(n: int, support: Mesh | None) -> np.ndarray | None:
     """(6, n, n) bool: the sky texels whose directions point below the support's plane, which the
     support hides from every copy (None without a support)."""
     if support is None:
         return None
-    a, b, c = support.positions[support.faces[0]].astype(np.float64)
-    normal = np.cross(b - a, c - a)  # the quad faces +normal (_basis)
-    return texel_directions(n) @ normal < 0
+    return _facing(n, support) < 0
+
+
+def irradiance_weights(n: int, support: Mesh) -> np.ndarray:
+    """(6, n, n): each sky texel's share of the irradiance on the support's plane, cos x solid
+    angle (0 below the horizon), so that E = sum(w kg) is what the sky pours onto the ground."""
+    return np.clip(_facing(n, support), 0.0, None) * cube_texel_solid_angles(n)[None]
 
 
 def first_sky(n: int, below: np.ndarray | None, support_radiance) -> np.ndarray:

@@ -14,9 +14,12 @@ trainer/train_material.py) says how, and this follows it where our scenes allow:
 - Roughness MSE: SfD's roughness r is Disney's (GGX alpha = r^2); ours is ka = Beckmann alpha^2,
   so r = ka^(1/4). ``mse`` is on r as the text says; the code gamma-encodes r first
   (``mse_gamma``, r^(1/2.2)). No scale: roughness has no ambiguity.
-- Env MSE: both skies on a 512 x 256 lat-long grid of directions (the code's size), clipped to
+- Env MSE: both skies on a 512 x 256 lat-long grid of directions (the code's size and grid:
+  ``MaterialTrainRunner.evaluate_envmap`` draws its sky at linspace(0, pi, 256) x linspace(pi, -pi,
+  512) over the whole sphere, ``upper_hemi`` off, and resizes the true map to it), clipped to
   [0, 1] and gamma-encoded, the plain mean over the grid's pixels (which counts the poles more,
-  as the code's does) and channels; no scale (the code has none). A sun clips to 1 there, as in
+  as the code's does) and channels; no scale (the code has none). So the paper's figure covers
+  the ground below the horizon too, as ``mse`` does. A sun clips to 1 there, as in
   SfD's. Also on the sphere (``mse_solid_angle``, each cube texel by its solid angle), linear
   (``mse_linear``, ``maps.kg_mse``), and with the albedo's scale undone (``mse_with_albedo_scale``:
   the recovered kg divided by the per-channel linear factor, (channel scale)^2.2, that the albedo
