@@ -18,7 +18,8 @@ steps.json in WORK/LAYOUT):
 Rows: ``stages`` (what the tree's stages give) and ``truth objects`` (the truth's objects taken
 into room_box's world through the photo's camera, x_rb = R_rb^T (R_t x + t_t) / s - R_rb^T t_rb:
 what the later stages see when the object stage is perfect, so that the lights', materials' and
-photo's numbers are not only the empty room's). A step that stopped with a SceneError ends its
+photo's numbers are not only the empty room's; grey materials: room_materials' atlases are
+shaped for the object stage's own placements). A step that stopped with a SceneError ends its
 row with the message; the other rows go on.
 """
 
@@ -116,7 +117,7 @@ def _optional(name: str, ledger: Ledger, output: Path, *args, **kwargs):
     try:
         stage = importlib.import_module(f"invrender.{name}.stage")
         ledger.run(name, output, stage.run, *args, **kwargs)
-    except (Stopped, TypeError, ValueError) as error:
+    except Exception as error:  # noqa: BLE001 - a stage written beside this one: its failure is a result
         log.error("bench room: %s stopped: %s", name, error)
         ledger.steps[name] = {**(ledger.steps.get(name) or {}), "error": str(error)}
         return None
@@ -149,13 +150,13 @@ def row_steps(row: str, dirs: dict, settings: Settings, ledger: Ledger) -> None:
     from ..export import stage as export
 
     folder = ledger.path.parent
-    objects = dirs["objects"]
-    if row == "truth objects":
-        objects = folder / "objects"
+    objects, materials = dirs["objects"], dirs["materials"]
+    if row == "truth objects":  # room_materials' atlases are shaped for its own objects' unwraps: grey here
+        objects, materials = folder / "objects", None
         ledger.run("truth objects", objects, truth_objects, dirs["capture"], dirs["room"], objects)
     ledger.run(
         "bake", folder / "scene", bake.run, dirs["room"], folder / "scene", dirs["lights"], objects,
-        dirs["materials"], dirs["capture"],
+        materials, dirs["capture"],
     )  # fmt: skip
     ledger.run(
         "evaluate", folder / "report", evaluate.run, folder / "scene", dirs["capture"], dirs["room"],
