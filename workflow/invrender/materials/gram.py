@@ -69,9 +69,17 @@ class RandomGramNet(nn.Module):
         out = []
         x = self.prepare(x)
         for conv in self.convs:
-            x = nn.functional.avg_pool2d(torch.relu(conv(x)), 2, ceil_mode=True)
+            x = nn.functional.avg_pool2d(torch.relu(_convolve(conv, x)), 2, ceil_mode=True)
             out.append(x)
         return out
+
+
+def _convolve(conv: nn.Conv2d, x: torch.Tensor) -> torch.Tensor:
+    """``conv`` with its reflect padding, or with the edge repeated where a side is one pixel: a
+    crop of 16 pixels is one pixel high after four poolings, and a reflection needs two."""
+    if min(x.shape[-2:]) >= 2:
+        return conv(x)
+    return nn.functional.conv2d(nn.functional.pad(x, (1, 1, 1, 1), mode="replicate"), conv.weight, conv.bias)
 
 
 class VGG19Features(nn.Module):
