@@ -1198,9 +1198,8 @@ def room_lights_options(wildcards):
 # ---------------------------------------------------------------------------- room scene
 # (the input functions of bake_room in workflow/rules/bake.smk and evaluate_room)
 
-# The room stages after room_box whose outputs the room scene takes when their rule exists
-# (room_objects and room_materials are written in parallel with bake_room: each is taken from
-# results/{scene}/<stage> as soon as its rule is part of the workflow).
+# The room stages after room_box whose outputs the room scene takes (bake_room's flags). A user
+# stops after the room or the objects by asking for results/{scene}/room_box or room_objects.
 ROOM_SCENE_STAGES = {
     "room_lights": "lights",
     "room_objects": "objects",
@@ -1208,17 +1207,11 @@ ROOM_SCENE_STAGES = {
 }
 
 
-def room_stages_present():
-    """The room stages (ROOM_SCENE_STAGES) whose rules this workflow defines."""
-    defined = {rule.name for rule in workflow.rules}
-    return [stage for stage in ROOM_SCENE_STAGES if stage in defined]
-
-
 def room_scene_inputs(wildcards):
     results = f"results/{wildcards.scene}"
     inputs = {"room": f"{results}/room_box", "capture": room_box_input(wildcards)}
-    for stage in room_stages_present():
-        inputs[ROOM_SCENE_STAGES[stage]] = f"{results}/{stage}"
+    for stage, flag in ROOM_SCENE_STAGES.items():
+        inputs[flag] = f"{results}/{stage}"
     return inputs
 
 
@@ -1227,8 +1220,7 @@ def bake_room_options(wildcards):
     and the texel density."""
     results = f"results/{wildcards.scene}"
     options = [
-        f"--{ROOM_SCENE_STAGES[stage]} {results}/{stage}"
-        for stage in room_stages_present()
+        f"--{flag} {results}/{stage}" for stage, flag in ROOM_SCENE_STAGES.items()
     ]
     options.append(f"--capture {shlex.quote(capture_dir(wildcards))}")
     options.append(room_lights_options(wildcards))
@@ -1244,9 +1236,9 @@ def room_evaluate_inputs(wildcards):
         "capture": f"{results}/capture",
         "room": f"{results}/room_box",
     }
-    for stage in room_stages_present():
+    for stage, flag in ROOM_SCENE_STAGES.items():
         if stage != "room_materials":
-            inputs[ROOM_SCENE_STAGES[stage]] = f"{results}/{stage}"
+            inputs[flag] = f"{results}/{stage}"
     return inputs
 
 
@@ -1254,8 +1246,8 @@ def room_evaluate_options(wildcards):
     """--lights and --objects for the stages present (their fit and metrics)."""
     results = f"results/{wildcards.scene}"
     return " ".join(
-        f"--{ROOM_SCENE_STAGES[stage]} {results}/{stage}"
-        for stage in room_stages_present()
+        f"--{flag} {results}/{stage}"
+        for stage, flag in ROOM_SCENE_STAGES.items()
         if stage != "room_materials"
     )
 
@@ -1283,20 +1275,18 @@ def room_materials_inputs(wildcards):
         "capture": room_box_input(wildcards),
         "room": f"{results}/room_box",
         "lights": f"{results}/room_lights",
+        "objects": f"{results}/room_objects",
     }
-    if "room_objects" in room_stages_present():
-        inputs["objects"] = f"{results}/room_objects"
     return inputs
 
 
 def room_materials_options(wildcards):
-    """--objects when room_objects exists, the capture's named files, the config's settings,
+    """--objects, the capture's named files, the config's settings,
     and the scene's user crop pairs (as JSON text)."""
     results = f"results/{wildcards.scene}"
     settings = config.get("room_materials", {})
     options = [room_lights_options(wildcards)]
-    if "room_objects" in room_stages_present():
-        options.append(f"--objects {results}/room_objects")
+    options.append(f"--objects {results}/room_objects")
     options += [
         f"--rounds {settings.get('rounds', 4)}",
         f"--steps {settings.get('steps', 8)}",
