@@ -18,7 +18,6 @@ stand for the windows). The capture's panoptic.json names each object's class (a
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
@@ -28,22 +27,12 @@ from ..assets.library import library
 from ..scene.atomic import check_output
 from ..scene.format import write_scene
 from ..scene.room_photo import load_room_photo
-from ..scene.room_scene import assemble_room
+from ..scene.room_scene import assemble_room, read_json
 from ..scene.types import ATLAS_MAPS, Atlas, SceneError
 
-__all__ = ["run", "read_json", "read_materials"]
+__all__ = ["run", "read_materials"]
 
 log = logging.getLogger(__name__)
-
-
-def read_json(path, what: str) -> dict:
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise SceneError(path, "(file)", what) from None
-    except json.JSONDecodeError as error:
-        raise SceneError(path, "(JSON)", f"{what} as JSON ({error})") from None
 
 
 def read_materials(materials_dir) -> tuple[dict, np.ndarray | None]:

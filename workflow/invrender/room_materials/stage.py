@@ -35,7 +35,7 @@ from ..materials.retrieval import default_network
 from ..render.renderer import pixel_requests
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.room_photo import load_room_photo
-from ..scene.room_scene import assemble_room
+from ..scene.room_scene import assemble_room, read_json
 from ..scene.types import SceneError
 from .crops import CropPair, crop_rectangles, user_pairs
 from .figures import crops_figure, thumbnails
@@ -65,15 +65,6 @@ class MaterialSettings:
     fit_steps: int = 40
     eval_width: int = 256  # the PSNR's render
     eval_spp: int = 64
-
-
-def _read_json(path: Path, what: str):
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise SceneError(path, "(file)", what) from None
-    except json.JSONDecodeError as error:
-        raise SceneError(path, "(JSON)", f"{what} ({error})") from None
 
 
 def _photo_masks(photo, parts) -> list[np.ndarray]:
@@ -106,14 +97,14 @@ def run(
     check_output(out_dir, KIND)
     photo = load_room_photo(capture_dir, **(files or {}))
     photo.require("segmentation")
-    room = _read_json(Path(room_dir) / "room.json", "the room_box stage's room.json")
+    room = read_json(Path(room_dir) / "room.json", "the room_box stage's room.json")
     objects, dirs = [], []
     if objects_dir is not None:
-        doc = _read_json(Path(objects_dir) / "objects.json", "the room_objects stage's objects.json")
+        doc = read_json(Path(objects_dir) / "objects.json", "the room_objects stage's objects.json")
         objects = doc["objects"] if isinstance(doc, dict) else doc
         dirs = list(doc.get("asset_dirs", [])) if isinstance(doc, dict) else []
     lights_doc = (
-        _read_json(Path(lights_dir) / "lights.json", "the room_lights stage's lights.json") if lights_dir else {}
+        read_json(Path(lights_dir) / "lights.json", "the room_lights stage's lights.json") if lights_dir else {}
     )
     assets = {a.name: a for a in library(dirs)}
     scene = assemble_room(

@@ -44,9 +44,11 @@ object, light): evaluate's mask IoU per class and the edit stage's regions read 
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -57,6 +59,7 @@ from .types import Atlas, Camera, Mesh, Scene, SceneError, SceneObject
 
 __all__ = [
     "DEFAULT_MATERIAL",
+    "read_json",
     "RoomScene",
     "assemble_room",
     "room_camera",
@@ -79,6 +82,18 @@ class RoomScene(Scene):
     parts; scene.json's metadata when baked)."""
 
     metadata: dict = field(default_factory=dict)
+
+
+def read_json(path, what: str) -> dict:
+    """A room stage's JSON (room.json, objects.json, lights.json, materials.json), or one
+    SceneError naming the file and ``what`` it should be."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise SceneError(path, "(file)", what) from None
+    except json.JSONDecodeError as error:
+        raise SceneError(path, "(JSON)", f"{what} as JSON ({error})") from None
 
 
 def safe_name(name: str) -> str:
