@@ -31,6 +31,7 @@ import numpy as np
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.images import linear_to_srgb
 from ..scene.room_photo import load_room_photo
+from ..scene.room_scene import read_json, room_camera
 from ..scene.types import Camera, SceneError, require_positive
 from .lights import LightSettings, initial_lights
 from .radiance import light_scene, radiance_scale, unit_render
@@ -45,36 +46,21 @@ KIND_COLOURS = {"ceiling": (0, 220, 255), "camera": (0, 0, 255), "wall": (255, 0
 
 
 def read_room(room_json) -> tuple[SimpleNamespace, Camera]:
-    """room.json's box (center, size, yaw_deg) and camera (the room_box stage's camera_json)."""
+    """room.json's box (center, size, yaw_deg) and camera (scene/room_scene.room_camera)."""
     room_json = Path(room_json)
+    doc = read_json(room_json, "the room_box stage's room.json")
     try:
-        doc = json.loads(room_json.read_text())
-        b, c = doc["box"], doc["camera"]
+        b = doc["box"]
         box = SimpleNamespace(
             center=np.asarray(b["center"], float).reshape(3),
             size=np.asarray(b["size"], float).reshape(3),
             yaw_deg=float(b.get("yaw_deg", 0.0)),
         )
-        camera = Camera(
-            "photo",
-            "PINHOLE",
-            int(c["width"]),
-            int(c["height"]),
-            np.asarray(c["params"], float).reshape(4),
-            np.asarray(c["R"], float).reshape(3, 3),
-            np.asarray(c["t"], float).reshape(3),
-        )
-    except FileNotFoundError:
-        raise SceneError(room_json, "(file)", "the room_box stage's room.json") from None
     except (ValueError, KeyError, TypeError) as error:
-        raise SceneError(
-            room_json,
-            "box/camera",
-            f"room_box's box {{center, size, yaw_deg}} and camera {{width, height, params, R, t}} ({error})",
-        ) from None
+        raise SceneError(room_json, "box", f"room_box's box {{center, size, yaw_deg}} ({error})") from None
     if np.any(box.size <= 0):
         raise SceneError(room_json, "box.size", f"three positive extents, got {box.size.tolist()}")
-    return box, camera
+    return box, room_camera(doc, room_json)
 
 
 def reduced_camera(camera: Camera, max_width: int) -> Camera:

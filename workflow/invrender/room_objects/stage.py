@@ -29,6 +29,7 @@ from .. import assets
 from ..scene.atomic import atomic_dir, check_output
 from ..scene.images import linear_to_srgb
 from ..scene.room_photo import load_room_photo
+from ..scene.room_scene import read_json, room_camera
 from ..scene.types import Camera, SceneError, require_positive
 from . import metrics as measures
 from .placement import (
@@ -63,38 +64,27 @@ class Settings:
 
 
 def read_room(room_json) -> dict:
-    """room_box's room.json: the box, the camera (world-to-camera R, t; params) and depth_scale,
+    """room_box's room.json: the box, the camera (scene/room_scene.room_camera) and depth_scale,
     with one SceneError naming what is wrong."""
     room_json = Path(room_json)
+    doc = read_json(room_json, "the room_box stage's room.json")
+    camera = room_camera(doc, room_json)
     try:
-        doc = json.loads(room_json.read_text())
-        b, c = doc["box"], doc["camera"]
+        b = doc["box"]
         room = {
             "box": (
                 np.asarray(b["center"], float).reshape(3),
                 np.asarray(b["size"], float).reshape(3),
                 float(b.get("yaw_deg", 0.0)),
             ),
-            "camera": Camera(
-                "photo",
-                "PINHOLE",
-                int(c["width"]),
-                int(c["height"]),
-                np.asarray(c["params"], float).reshape(4),
-                np.asarray(c["R"], float).reshape(3, 3),
-                np.asarray(c["t"], float).reshape(3),
-            ),  # fmt: skip
+            "camera": camera,
             "depth_scale": float(doc["depth_scale"]),
             "truth_scale": float(doc.get("metrics", {}).get("truth_scale", 1.0)),
-            "json": {"box": b, "camera": c},
+            "json": {"box": b, "camera": doc["camera"]},
         }
-    except FileNotFoundError:
-        raise SceneError(room_json, "(file)", "the room_box stage's room.json") from None
     except (ValueError, KeyError, TypeError) as error:
         raise SceneError(
-            room_json,
-            "box/camera/depth_scale",
-            f"room_box's box, camera {{width, height, params, R, t}} and depth_scale ({error})",
+            room_json, "box/depth_scale", f"room_box's box {{center, size, yaw_deg}} and depth_scale ({error})"
         ) from None
     if np.any(room["box"][1] <= 0) or not room["depth_scale"] > 0:
         raise SceneError(room_json, "box.size/depth_scale", "positive sizes and a positive depth_scale")
