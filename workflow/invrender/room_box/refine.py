@@ -35,6 +35,8 @@ import numpy as np
 import torch
 
 from ..render.silhouette import rotation_matrix
+from ..scene.cameras import binned_camera
+from ..scene.images import block_mean
 from ..scene.types import Camera
 from .box import BOX_CLASSES, OrientedBox, RoomBox, box_mesh, rotation_y
 
@@ -63,37 +65,23 @@ class Targets:
     camera: Camera  # the reduced camera
 
 
-def reduced_camera(camera: Camera, factor: int) -> Camera:
-    """The camera of an image ``factor`` times smaller (the right and bottom remainders cut)."""
-    fx, fy = camera.focal
-    cx, cy = camera.principal_point
-    params = np.array([fx / factor, fy / factor, cx / factor, cy / factor])
-    width, height = camera.width // factor, camera.height // factor
-    return Camera(camera.name, "PINHOLE", width, height, params, camera.R, camera.t)
-
-
-def _blocks(image: np.ndarray, factor: int) -> np.ndarray:
-    h, w = image.shape[0] // factor, image.shape[1] // factor
-    return image[: h * factor, : w * factor].reshape(h, factor, w, factor).mean(axis=(1, 3))
-
-
 def reduced_targets(classes: np.ndarray, depth: np.ndarray, camera: Camera, max_width: int) -> Targets:
     """Block averages of the class image (BOX_CLASSES indices, -1 elsewhere) and of the
     normalised depth, at most ``max_width`` wide."""
     factor = max(1, int(np.ceil(camera.width / max_width)))
     room = classes >= 0
-    weight = _blocks(room.astype(np.float64), factor)
+    weight = block_mean(room.astype(np.float64), factor)
     with np.errstate(invalid="ignore", divide="ignore"):
-        masks = np.stack([_blocks((classes == c).astype(np.float64), factor) / weight for c in range(3)])
+        masks = np.stack([block_mean((classes == c).astype(np.float64), factor) / weight for c in range(3)])
         has_depth = room & (depth > 0)
-        depth_weight = _blocks(has_depth.astype(np.float64), factor)
-        mean_depth = _blocks(np.where(has_depth, depth, 0.0), factor) / depth_weight
+        depth_weight = block_mean(has_depth.astype(np.float64), factor)
+        mean_depth = block_mean(np.where(has_depth, depth, 0.0), factor) / depth_weight
     return Targets(
         masks=np.nan_to_num(masks),
         weight=weight,
         depth=np.nan_to_num(mean_depth),
         depth_weight=depth_weight,
-        camera=reduced_camera(camera, factor),
+        camera=binned_camera(camera, factor),
     )
 
 

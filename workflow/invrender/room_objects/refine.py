@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..scene.cameras import binned_camera
+from ..scene.images import block_mean
 from ..scene.types import Camera
 from .placement import FREE, Placement
 
@@ -58,20 +60,8 @@ class Targets:
     camera: Camera  # the reduced camera, normalised units
 
 
-def _blocks(image: np.ndarray, factor: int) -> np.ndarray:
-    h, w = image.shape[0] // factor, image.shape[1] // factor
-    return image[: h * factor, : w * factor].reshape(h, factor, w, factor, *image.shape[2:]).mean(axis=(1, 3))
-
-
 def block_factor(width: int, max_width: int) -> int:
     return max(1, int(np.ceil(width / max_width)))
-
-
-def reduced_camera(camera: Camera, factor: int) -> Camera:
-    """The camera of an image ``factor`` times smaller (the right and bottom remainders cut)."""
-    fx, fy, cx, cy = np.asarray(camera.params, np.float64)
-    params = np.array([fx / factor, fy / factor, cx / factor, cy / factor])
-    return Camera(camera.name, "PINHOLE", camera.width // factor, camera.height // factor, params, camera.R, camera.t)
 
 
 def reduced_targets(masks: list[np.ndarray], depth: np.ndarray, camera: Camera, max_width: int) -> Targets:
@@ -80,9 +70,9 @@ def reduced_targets(masks: list[np.ndarray], depth: np.ndarray, camera: Camera, 
     shape = (len(masks), camera.height // factor, camera.width // factor)
     out_m, out_d = np.zeros(shape), np.zeros(shape)
     for i, mask in enumerate(masks):
-        out_m[i] = _blocks(mask.astype(np.float64), factor)
-        out_d[i] = _blocks(np.where(mask, depth, 0.0), factor)
-    return Targets(out_m, out_d, reduced_camera(camera, factor))
+        out_m[i] = block_mean(mask.astype(np.float64), factor)
+        out_d[i] = block_mean(np.where(mask, depth, 0.0), factor)
+    return Targets(out_m, out_d, binned_camera(camera, factor))
 
 
 def box_part(center, size, yaw_deg: float, label: int):
@@ -276,8 +266,8 @@ def exact_losses(placements: list[Placement], targets: Targets, settings: Refine
     big = Camera(cam.name, "PINHOLE", cam.width * supersample, cam.height * supersample,
                  np.array([fx, fy, cx, cy]), cam.R, cam.t)  # fmt: skip
     labels, depth = label_image(placements, big)
-    masks = np.stack([_blocks((labels == i).astype(np.float64), supersample) for i in range(len(placements))])
-    masked = np.stack([_blocks(np.where(labels == i, depth, 0.0), supersample) for i in range(len(placements))])
+    masks = np.stack([block_mean((labels == i).astype(np.float64), supersample) for i in range(len(placements))])
+    masked = np.stack([block_mean(np.where(labels == i, depth, 0.0), supersample) for i in range(len(placements))])
     kernel = blur_matrices(targets.masks.shape[1:], settings.blur_px)
     losses, _ = object_losses(torch.as_tensor(masks), torch.as_tensor(masked), targets, settings, kernel)
     return losses.numpy()

@@ -27,6 +27,7 @@ import numpy as np
 
 from .. import assets
 from ..scene.atomic import atomic_dir, check_output
+from ..scene.cameras import binned_camera
 from ..scene.images import linear_to_srgb
 from ..scene.room_photo import load_room_photo
 from ..scene.room_scene import read_json, room_camera
@@ -42,7 +43,7 @@ from .placement import (
     support_order,
     supports,
 )
-from .refine import RefineSettings, block_factor, exact_losses, reduced_camera, reduced_targets, refine
+from .refine import RefineSettings, block_factor, exact_losses, reduced_targets, refine
 
 __all__ = ["run", "read_room", "Settings"]
 
@@ -302,7 +303,7 @@ def _choose(rounds, parents, targets, settings: RefineSettings) -> tuple[list[Pl
 def _metric_view(photo, segments, camera) -> tuple[Camera, list[np.ndarray]]:
     """The camera and the segments' masks at most METRIC_WIDTH wide (a block's majority)."""
     factor = block_factor(photo.width, METRIC_WIDTH)
-    small = reduced_camera(camera, factor)
+    small = binned_camera(camera, factor)
     h, w = small.height, small.width
     masks = [
         seg.mask[: h * factor, : w * factor].reshape(h, factor, w, factor).mean(axis=(1, 3)) > 0.5 for seg in segments

@@ -309,6 +309,14 @@ def project_points(camera: Camera, points) -> np.ndarray:
     return uv
 
 
+def binned_camera(camera: Camera, factor: int) -> Camera:
+    """The pinhole camera of an image ``factor`` times smaller by whole blocks of pixels (the
+    right and bottom remainders cut), as ``images.block_mean`` reduces an image."""
+    fx, fy, cx, cy = np.asarray(camera.params, np.float64)
+    params = np.array([fx / factor, fy / factor, cx / factor, cy / factor])
+    return Camera(camera.name, "PINHOLE", camera.width // factor, camera.height // factor, params, camera.R, camera.t)
+
+
 def pixel_directions(camera: Camera) -> np.ndarray:
     """(H, W, 3) world direction (not normalised) of each pixel centre of a camera without
     distortion: the inverse of ``project_points`` (pixel (x, y)'s centre at (x + 0.5, y + 0.5))."""

@@ -101,6 +101,13 @@ def check_finite(image: np.ndarray, path) -> np.ndarray:
     return image
 
 
+def block_mean(image: np.ndarray, factor: int) -> np.ndarray:
+    """The mean of each ``factor`` x ``factor`` block of pixels (H, W, ...); the right and bottom
+    remainders are cut, as ``cameras.binned_camera`` cuts its image."""
+    h, w = image.shape[0] // factor, image.shape[1] // factor
+    return image[: h * factor, : w * factor].reshape(h, factor, w, factor, *image.shape[2:]).mean(axis=(1, 3))
+
+
 def read_image(path, finite: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, C), C = 1 or 3, RGB order.
 
