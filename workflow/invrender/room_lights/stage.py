@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from ..scene.atomic import atomic_dir, check_output
+from ..scene.cameras import resized_camera
 from ..scene.images import linear_to_srgb
 from ..scene.room_photo import load_room_photo
 from ..scene.room_scene import read_json, room_camera
@@ -36,7 +37,7 @@ from ..scene.types import Camera, SceneError, require_positive
 from .lights import LightSettings, initial_lights
 from .radiance import light_scene, radiance_scale, unit_render
 
-__all__ = ["run", "read_room", "reduced_camera"]
+__all__ = ["run", "read_room"]
 
 logger = logging.getLogger(__name__)
 
@@ -61,17 +62,6 @@ def read_room(room_json) -> tuple[SimpleNamespace, Camera]:
     if np.any(box.size <= 0):
         raise SceneError(room_json, "box.size", f"three positive extents, got {box.size.tolist()}")
     return box, room_camera(doc, room_json)
-
-
-def reduced_camera(camera: Camera, max_width: int) -> Camera:
-    """The same camera with its image shrunk to at most ``max_width`` wide (intrinsics scaled)."""
-    k = min(1.0, max_width / camera.width)
-    width, height = max(1, round(camera.width * k)), max(1, round(camera.height * k))
-    sx, sy = width / camera.width, height / camera.height
-    fx, fy, cx, cy = np.asarray(camera.params, float)
-    return Camera(
-        camera.name, camera.model, width, height, np.array([fx * sx, fy * sy, cx * sx, cy * sy]), camera.R, camera.t
-    )
 
 
 def _room_mask(photo, size) -> np.ndarray:
@@ -115,7 +105,7 @@ def run(
             f"the photo's size {photo.width} x {photo.height}, got {camera.width} x {camera.height}",
         )
     lights = initial_lights(box, camera, settings, photo.segments, photo.labels)
-    small = reduced_camera(camera, max_width)
+    small = resized_camera(camera, min(camera.width, max_width))  # at most max_width wide
     scene = light_scene(box, lights.lights, small, inset=settings.inset)
     unit = unit_render(scene, small, spp=spp, seed=seed, device=device)
     target = cv2.resize(photo.image, (small.width, small.height), interpolation=cv2.INTER_AREA)

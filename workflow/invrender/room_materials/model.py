@@ -25,7 +25,7 @@ from ..materials.library import material as library_material
 from ..scene.atlas import rasterize_atlas
 from ..scene.types import Camera, Maps, Scene
 
-__all__ = ["Part", "Light", "PartMaterial", "RoomModel", "scaled_camera", "crop_camera"]
+__all__ = ["Part", "Light", "PartMaterial", "RoomModel", "crop_camera"]
 
 GUTTER = 2  # texels a chart's values are copied into the gutter (the synthetic rooms bake with 2)
 
@@ -219,17 +219,6 @@ class RoomModel:
         hit = (tri >= 0) & (tri < len(self.face_part))
         out[hit] = self.face_part[tri[hit]]
         return out
-
-
-def scaled_camera(camera: Camera, width: int) -> Camera:
-    """The camera with its image resized to ``width`` (intrinsics scaled, the same view)."""
-    k = width / camera.width
-    height = max(1, round(camera.height * k))
-    fx, fy, cx, cy = np.asarray(camera.params, float)[:4]
-    sy = height / camera.height
-    return Camera(
-        camera.name, "PINHOLE", int(width), height, np.array([fx * k, fy * sy, cx * k, cy * sy]), camera.R, camera.t
-    )
 
 
 MIN_CROP = 32  # the Gram network's five poolings need at least 2 x 2 features after the fourth

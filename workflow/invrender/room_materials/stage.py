@@ -34,6 +34,7 @@ from ..assets.library import library
 from ..materials.retrieval import default_network
 from ..render.renderer import pixel_requests
 from ..scene.atomic import atomic_dir, check_output
+from ..scene.cameras import resized_camera
 from ..scene.room_photo import load_room_photo
 from ..scene.room_scene import assemble_room, read_json
 from ..scene.types import SceneError
@@ -41,7 +42,7 @@ from .crops import CropPair, crop_rectangles, user_pairs
 from .figures import crops_figure, thumbnails
 from .init import plain, retrieve_part, seen_radiance, shading_albedo
 from .metrics import psnr, truth_metrics
-from .model import RoomModel, crop_camera, from_room_scene, scaled_camera
+from .model import RoomModel, crop_camera, from_room_scene
 from .optimise import Eq4, Eq4Settings, Views, make_renderer
 
 __all__ = ["MaterialSettings", "run"]
@@ -150,7 +151,7 @@ def run(
                 break
 
     width = min(photo.width, max(settings.min_width, round(photo.width / settings.downsample)))
-    small = scaled_camera(camera, width)
+    small = resized_camera(camera, width)
     size = (small.width, small.height)
     photo_small = cv2.resize(photo.image, size, interpolation=cv2.INTER_AREA)
     masks_small = _small_masks(inter, size)
@@ -215,7 +216,7 @@ def run(
         seed,
     )
     figure_cams = [crop_camera(camera, p.render, settings.crop_size, f"fig{k}") for k, p in enumerate(pairs)]
-    eval_cam = scaled_camera(camera, min(photo.width, settings.eval_width))
+    eval_cam = resized_camera(camera, min(photo.width, settings.eval_width))
     eval_photo = cv2.resize(photo.image, (eval_cam.width, eval_cam.height), interpolation=cv2.INTER_AREA)
 
     def evaluate():

@@ -317,6 +317,16 @@ def binned_camera(camera: Camera, factor: int) -> Camera:
     return Camera(camera.name, "PINHOLE", camera.width // factor, camera.height // factor, params, camera.R, camera.t)
 
 
+def resized_camera(camera: Camera, width: int) -> Camera:
+    """The pinhole camera with its image resized to ``width`` (height in proportion, rounded):
+    the same view, intrinsics scaled per axis by the sizes' ratios."""
+    height = max(1, round(camera.height * width / camera.width))
+    sx, sy = width / camera.width, height / camera.height
+    fx, fy, cx, cy = np.asarray(camera.params, np.float64)[:4]
+    params = np.array([fx * sx, fy * sy, cx * sx, cy * sy])
+    return Camera(camera.name, "PINHOLE", int(width), height, params, camera.R, camera.t)
+
+
 def pixel_directions(camera: Camera) -> np.ndarray:
     """(H, W, 3) world direction (not normalised) of each pixel centre of a camera without
     distortion: the inverse of ``project_points`` (pixel (x, y)'s centre at (x + 0.5, y + 0.5))."""
