@@ -6,6 +6,7 @@ why; resume skips a step whose output exists and keeps its recorded time. docs/b
 
 import json
 import re
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -143,7 +144,9 @@ def test_scenes_and_variants():
     quick = bench.settings_from(True, None, None, None)
     assert quick.scenes == ["box-6-ci", "can-6-ci"] and all(v == ["default"] for v in quick.variants.values())
     full = bench.settings_from(False, None, None, "work")
-    assert full.variants["box-10-hd"] == ["default", "no-rotation-search", "sift", "tracks-subpixel"]
+    assert full.variants["box-10-hd"] == [
+        "default", "no-rotation-search", "sift", "tracks-subpixel", "provided-tracks-subpixel", "provided-track-search",
+    ]  # fmt: skip
     assert full.variants["can-20-hd"] == ["default"]
     chosen = bench.settings_from(False, "box-20-hd,can-6-ci", "sift", None)
     assert chosen.variants == {"box-20-hd": ["sift"], "can-6-ci": ["sift"]}
@@ -157,3 +160,26 @@ def test_duplicates_options_refused_elsewhere():
     args = SimpleNamespace(quick=True, out="x", device=None, scenes="box-6-ci")
     with pytest.raises(SceneError, match="--scenes"):
         run_benchmark("milo", args)
+
+
+def test_a_provided_variant_segments_the_capture_masks_once_and_apart(tmp_path, monkeypatch):
+    """A variant with `masks: provided` reads the capture's instance-id image through segment's
+    provided backend into its own folder; the opencv backend runs only for a variant that needs it."""
+    from invrender.cameras import stage as cameras
+    from invrender.segment import stage as segment
+
+    calls = []
+    monkeypatch.setattr(cameras, "run", lambda sparse, out, **k: Path(out).mkdir(parents=True))
+    monkeypatch.setattr(
+        segment, "run", lambda image, out, **k: (calls.append((Path(out).name, k)), Path(out).mkdir(parents=True))
+    )
+    capture, scene_dir = tmp_path / "capture", tmp_path / "box-20-hd"
+    sources = {bench.mask_source(v) for v in ("provided-tracks-subpixel", "provided-track-search")}
+    bench.shared_steps(capture, scene_dir, bench.Ledger(scene_dir), sources)
+    masks = capture / "ground_truth" / "masks" / "view_000.png"
+    assert calls == [("segmentation-provided", {"backend": "provided", "masks": masks})]
+    assert bench.segmentation_of(scene_dir, "provided-track-search") == scene_dir / "segmentation-provided"
+    assert bench.segmentation_of(scene_dir, "tracks-subpixel") == scene_dir / "segmentation"
+    calls.clear()
+    bench.shared_steps(capture, scene_dir, bench.Ledger(scene_dir), {"opencv", "provided"})
+    assert calls == [("segmentation", {})]  # the provided one exists: resumed, not run again

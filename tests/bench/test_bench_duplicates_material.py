@@ -170,6 +170,21 @@ def test_scenes_poses_and_presets():
         bench.settings_from(False, "box-7-hd", None, None)
 
 
+def test_recovered_poses_from_a_named_variant_keep_their_own_folder_and_label():
+    settings = bench.settings_from(False, "box-20-hd", "truth,recovered", None, "provided-tracks-subpixel")
+    assert settings.pose_variant == "provided-tracks-subpixel"
+    assert bench.settings_from(False, None, None, None).pose_variant == "default"
+    assert bench.row_folder("recovered", "provided-tracks-subpixel") == "recovered-provided-tracks-subpixel"
+    assert bench.row_folder("recovered", "default") == "recovered" and bench.row_folder("truth", "sift") == "truth"
+    assert bench.pose_label({"poses": "recovered", "pose_variant": "sift"}) == "recovered (sift)"
+    assert bench.pose_label({"poses": "recovered", "pose_variant": "default"}) == "recovered"
+    assert bench.pose_label({"poses": "truth", "pose_variant": None}) == "truth"
+    with pytest.raises(SceneError, match="one bench duplicates variant"):
+        bench.settings_from(False, None, None, None, "default,sift")
+    with pytest.raises(SceneError, match="variants"):
+        bench.settings_from(False, None, None, None, "orb")
+
+
 def test_poses_option_belongs_to_this_bench():
     args = SimpleNamespace(quick=True, out="x", device=None, poses="truth")
     with pytest.raises(SceneError, match="--poses"):

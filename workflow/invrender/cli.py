@@ -957,7 +957,11 @@ def build_parser() -> argparse.ArgumentParser:
     dup.add_argument(
         "--scenes", help="comma-separated duplicates presets (default the -hd boxes and cans); bench room: layouts"
     )
-    dup.add_argument("--variants", help="comma-separated: default, no-rotation-search, sift (default all on box-10-hd)")
+    dup.add_argument(
+        "--variants",
+        help="comma-separated bench duplicates variants (default all on box-10-hd); bench duplicates-material: "
+        "the one whose poses are 'recovered' (default: default)",
+    )
     dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
     render = p.add_argument_group("bench render")
     render.add_argument(

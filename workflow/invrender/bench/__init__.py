@@ -50,7 +50,7 @@ OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
     "render": ("sections",),
     "duplicates": ("scenes", "variants", "work"),
-    "duplicates-material": ("scenes", "poses", "work"),
+    "duplicates-material": ("scenes", "poses", "variants", "work"),
     "accuracy": ("work",),
     "room": ("scenes", "work"),
 }  # what only some take

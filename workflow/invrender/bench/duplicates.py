@@ -48,7 +48,23 @@ VARIANTS = {
     # one keypoint set per copy (tracks.py), the planar flip turned back, sub-pixel tracks and a
     # joint bundle adjustment (adjust.py); refinement off: it is worse with a hull from rough poses
     "tracks-subpixel": {"track_size": 512, "subpixel_rounds": 3},
+    # the same from the capture's own instance masks (the renderer's instance AOV, given to the
+    # segment stage's provided backend as a user gives masks from any tool), with refinement on,
+    # so that one run gives the poses before and after render-and-compare
+    "provided-tracks-subpixel": {"masks": "provided", "track_size": 512, "subpixel_rounds": 3, "refine": True},
+    # and with every pair's angle searched again on the fixed keypoints, pairs that disagree dropped
+    "provided-track-search": {
+        "masks": "provided",
+        "track_size": 512,
+        "subpixel_rounds": 3,
+        "track_search": True,
+        "pair_support": 0.5,
+        "refine": True,
+    },  # fmt: skip
 }
+# Where a variant's instance masks come from: the opencv backend on the photo (the default), or
+# the capture's instance-id image through the provided backend. Not a setting of the stage.
+MASK_SOURCES = {"opencv": "segmentation", "provided": "segmentation-provided"}
 ABLATION_SCENES = ("box-10-hd",)  # every variant here; the default alone elsewhere (unless --variants)
 STEPS = ("cameras", "segment", "crop", "solve", "evaluate")
 
@@ -115,8 +131,16 @@ def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, st
     return out, measured, f"rendered at {spp} spp"
 
 
-def shared_steps(capture: Path, scene_dir: Path, ledger: Ledger):
-    """cameras and segment: what every variant of a scene starts from."""
+def mask_source(variant: str) -> str:
+    return VARIANTS[variant].get("masks", "opencv")
+
+
+def segmentation_of(scene_dir: Path, variant: str) -> Path:
+    return scene_dir / MASK_SOURCES[mask_source(variant)]
+
+
+def shared_steps(capture: Path, scene_dir: Path, ledger: Ledger, sources=("opencv",)):
+    """cameras and segment (once per mask source): what every variant of a scene starts from."""
     from ..cameras import stage as cameras
     from ..segment import stage as segment
 
@@ -125,13 +149,18 @@ def shared_steps(capture: Path, scene_dir: Path, ledger: Ledger):
         "cameras", scene_dir / "cameras", cameras.run, capture / "sparse", scene_dir / "cameras",
         images_dir=capture / "images", progress=False,
     )  # fmt: skip
-    ledger.run("segment", scene_dir / "segmentation", segment.run, image, scene_dir / "segmentation")
+    if "opencv" in sources:
+        out = scene_dir / MASK_SOURCES["opencv"]
+        ledger.run("segment", out, segment.run, image, out)
+    if "provided" in sources:
+        masks, out = capture / "ground_truth" / "masks" / "view_000.png", scene_dir / MASK_SOURCES["provided"]
+        ledger.run("segment provided", out, segment.run, image, out, backend="provided", masks=masks)
 
 
-def _crops(scene_dir: Path, crops: Path, ids: list[int], settings):
+def _crops(seg: Path, crops: Path, ids: list[int], settings):
     from ..duplicates import stage
 
-    masks = scene_dir / "segmentation" / "masks" / "view_000.png"
+    scene_dir, masks = seg.parent, seg / "masks" / "view_000.png"
     for i in ids:
         crop, features = crops / f"instance_{i:03d}.npz", crops / f"instance_{i:03d}.features.npz"
         if not (crop.exists() and features.exists()):
@@ -143,9 +172,9 @@ def variant_steps(capture: Path, scene_dir: Path, variant: str, ledger: Ledger):
     from ..duplicates import stage
     from ..evaluate import stage as evaluate
 
-    settings = stage.settings_from(VARIANTS[variant])
+    settings = stage.settings_from({k: v for k, v in VARIANTS[variant].items() if k != "masks"})
     folder = scene_dir / variant
-    seg = scene_dir / "segmentation"
+    seg = segmentation_of(scene_dir, variant)
     ids = [int(e["id"]) for e in json.loads((seg / "instances.json").read_text())["instances"]]
     crops = folder / "crops"
     crops.mkdir(parents=True, exist_ok=True)
@@ -153,7 +182,7 @@ def variant_steps(capture: Path, scene_dir: Path, variant: str, ledger: Ledger):
     made = [crops / f"instance_{i:03d}.features.npz" for i in ids]
     if not done.exists():
         if not all(path.exists() for path in made):  # all there: another run made them, untimed
-            ledger.run("crop", done, _crops, scene_dir, crops, ids, settings)
+            ledger.run("crop", done, _crops, seg, crops, ids, settings)
         done.write_text("\n".join(map(str, ids)) + "\n")
     ledger.run(
         "solve", folder / "duplicates", stage.run, scene_dir / "cameras", seg / "masks" / "view_000.png",
@@ -171,12 +200,12 @@ def run_scene(preset: str, variants: list[str], work: Path, spp: int) -> list[di
     scene_dir = work / preset
     rows, error, shared = [], None, Ledger(scene_dir)
     try:
-        shared_steps(capture, scene_dir, shared)
+        shared_steps(capture, scene_dir, shared, {mask_source(v) for v in variants})
     except Stopped as stop:
         error = str(stop)
-    instances = scene_dir / "segmentation" / "instances.json"
-    segmented = len(json.loads(instances.read_text())["instances"]) if instances.exists() else None
     for variant in variants:
+        instances = segmentation_of(scene_dir, variant) / "instances.json"
+        segmented = len(json.loads(instances.read_text())["instances"]) if instances.exists() else None
         row = {"scene": preset, "variant": variant, "capture": str(capture), "capture_source": source}
         own = Ledger(scene_dir / variant)
         if error is None:

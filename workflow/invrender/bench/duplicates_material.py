@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..scene.types import SceneError
 from . import duplicates as poses_bench
 from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_scenes
 
@@ -44,7 +45,7 @@ QUICK_POSES = ("truth",)  # recovered poses need bench duplicates' matching: min
 MATERIAL_PRESET, QUICK_MATERIAL_PRESET = "default", "ci"
 EVALUATE_SPP = 16  # relighting renders: 4 per side at the photograph's size (its noise floor is reported)
 TARGET_FACES = 20_000  # the geometry stage's default (MILO's 20 K faces)
-VARIANT = "default"  # bench duplicates' variant whose poses are "recovered"
+VARIANT = "default"  # bench duplicates' variant whose poses are "recovered", unless --variants names another
 
 
 def atlas_resolution(preset: str) -> int:
@@ -63,14 +64,19 @@ class Settings:
     evaluate_spp: int = EVALUATE_SPP
     render_spp: int = poses_bench.RENDER_SPP
     atlas_resolution: dict = field(default_factory=dict)
+    pose_variant: str = VARIANT
 
 
-def settings_from(quick: bool, scenes, poses, work) -> Settings:
+def settings_from(quick: bool, scenes, poses, work, variants=None) -> Settings:
     from ..synthesize.duplicates import DUPLICATES_PRESETS
 
     scenes = poses_bench._names(scenes, sorted(DUPLICATES_PRESETS), "scenes") or list(QUICK_SCENES if quick else SCENES)
     poses = poses_bench._names(poses, list(POSES), "poses") or list(QUICK_POSES if quick else POSES)
+    chosen = poses_bench._names(variants, list(poses_bench.VARIANTS), "variants") or [VARIANT]
+    if len(chosen) != 1:
+        raise SceneError("bench duplicates-material --variants", "variants", "one bench duplicates variant")
     return Settings(
+        pose_variant=chosen[0],
         mode="quick" if quick else "full",
         scenes=scenes,
         poses=poses,
@@ -104,9 +110,9 @@ def truth_inputs(capture: Path, row: Path) -> Inputs:
     )  # fmt: skip
 
 
-def recovered_inputs(scene_dir: Path, row: Path) -> Inputs:
-    solved = scene_dir / VARIANT / "duplicates"
-    segmentation = scene_dir / "segmentation"
+def recovered_inputs(scene_dir: Path, row: Path, variant: str) -> Inputs:
+    solved = scene_dir / variant / "duplicates"
+    segmentation = poses_bench.segmentation_of(scene_dir, variant)
     return Inputs(
         row / "geometry", solved / "poses.json", segmentation / "masks" / "view_000.png", solved, segmentation
     )
@@ -153,14 +159,14 @@ def write_truth_segmentation(mask: Path, out: Path) -> None:
     (out / "instances.json").write_text(json.dumps(document, indent=2) + "\n")
 
 
-def recovered_poses(preset: str, work: Path, spp: int) -> None:
-    """bench duplicates' `default` variant of `preset` in `work`, run now if its poses are missing."""
-    if (work / preset / VARIANT / "duplicates" / "poses.json").exists():
+def recovered_poses(preset: str, work: Path, spp: int, variant: str) -> None:
+    """bench duplicates' `variant` of `preset` in `work`, run now if its poses are missing."""
+    if (work / preset / variant / "duplicates" / "poses.json").exists():
         return
-    log.info("bench duplicates-material: %s has no %s poses yet: bench duplicates runs it", preset, VARIANT)
-    row = poses_bench.run_scene(preset, [VARIANT], work, spp)[0]
+    log.info("bench duplicates-material: %s has no %s poses yet: bench duplicates runs it", preset, variant)
+    row = poses_bench.run_scene(preset, [variant], work, spp)[0]
     if row.get("error"):
-        raise Stopped(f"bench duplicates {preset} {VARIANT}: {row['error']}")
+        raise Stopped(f"bench duplicates {preset} {variant}: {row['error']}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -175,8 +181,8 @@ def inputs_step(source: str, capture: Path, scene_dir: Path, row: Path, settings
     if source == "truth":
         ledger.run("inputs", row / "inputs", make_truth_inputs, capture, row / "inputs", resolution)
         return truth_inputs(capture, row)
-    recovered_poses(scene_dir.name, scene_dir.parent, settings.render_spp)
-    inputs = recovered_inputs(scene_dir, row)
+    recovered_poses(scene_dir.name, scene_dir.parent, settings.render_spp, settings.pose_variant)
+    inputs = recovered_inputs(scene_dir, row, settings.pose_variant)
     ledger.run(
         "inputs", inputs.geometry, geometry.run, inputs.duplicates / "object.ply", inputs.geometry,
         target_faces=TARGET_FACES, atlas_resolution=resolution,
@@ -215,21 +221,30 @@ def _read(path: Path):
     return json.loads(path.read_text()) if path.exists() else None
 
 
+def row_folder(poses: str, variant: str) -> str:
+    """appearance/<this>: `recovered` from bench duplicates' default variant, `recovered-<variant>`
+    from another (so rows from different poses never share a folder)."""
+    return poses if poses == "truth" or variant == VARIANT else f"{poses}-{variant}"
+
+
 def run_scene(preset: str, settings: Settings) -> list[dict]:
     """Every pose source of one scene: its rows (metrics, measurements, or the error that stopped it)."""
     work = Path(settings.work)
     capture, _, source = poses_bench.capture_of(preset, work, settings.render_spp)
     scene_dir = work / preset
     shared, error = Ledger(scene_dir), None
+    recovering = "recovered" in settings.poses
     try:
-        poses_bench.shared_steps(capture, scene_dir, shared)
+        sources = {poses_bench.mask_source(settings.pose_variant)} if recovering else set()
+        poses_bench.shared_steps(capture, scene_dir, shared, sources)
     except Stopped as stop:
         error = str(stop)
     rows = []
     for poses in settings.poses:
-        folder = scene_dir / "appearance" / poses
+        folder = scene_dir / "appearance" / row_folder(poses, settings.pose_variant)
         own = Ledger(folder)
         row = {"scene": preset, "poses": poses, "capture": str(capture), "capture_source": source, "error": error}
+        row["pose_variant"] = settings.pose_variant if poses == "recovered" else None
         if error is None:
             try:
                 row_steps(poses, capture, scene_dir, settings, own)
@@ -260,7 +275,7 @@ def table_row(row: dict) -> dict:
 
     steps, training = row.get("steps") or {}, row.get("training") or {}
     copies = poses_bench.copies(row["scene"])
-    out = {"scene": row["scene"], "poses": row["poses"], "copies": int(copies), "error": row.get("error")}
+    out = {"scene": row["scene"], "poses": pose_label(row), "copies": int(copies), "error": row.get("error")}
     ours = _get(row["metrics"], "appearance", "table1", "ours") or {}
     start = _get(row["first_guess"], "appearance", "table1", "ours") or {}
     table2 = PAPER_TABLE2_COLOR_BOX.get(copies, {})
@@ -285,6 +300,12 @@ def table_row(row: dict) -> dict:
     return out
 
 
+def pose_label(row: dict) -> str:
+    """'truth', 'recovered' (bench duplicates' default variant) or 'recovered (VARIANT)'."""
+    variant = row.get("pose_variant")
+    return row["poses"] if variant in (None, VARIANT) else f"{row['poses']} ({variant})"
+
+
 def _verdict(line: dict) -> str | None:
     """Which of the four columns beat the paper's single-view Table 1 ("4/4"), None without numbers."""
     if line["albedo_psnr_db"] is None:
@@ -300,7 +321,7 @@ def _pairs(lines: list[dict]) -> list[dict]:
     """Truth and recovered poses of each scene on one line: what pose error costs."""
     out = []
     for scene in dict.fromkeys(line["scene"] for line in lines):
-        by = {line["poses"]: line for line in lines if line["scene"] == scene}
+        by = {line["poses"].split(" ")[0]: line for line in lines if line["scene"] == scene}
         truth, recovered = by.get("truth", {}), by.get("recovered", {})
         pair = {"scene": scene, "rotation_error_deg": recovered.get("rotation_error_deg")}
         for key in METRICS:
@@ -369,8 +390,8 @@ def write_markdown(out: Path, report: dict) -> str:
         "copies' pixels under two new skies, in place and rearranged (noise floor: the truth against "
         "itself at the same spp). Paper T1: SfD Table 1, single view; paper T2: SfD Table 2's colour box with "
         "the same number of copies (no relighting column there). Poses 'truth': the true mesh, poses and "
-        "masks; 'recovered': bench duplicates' default variant (poses, shared mesh through the geometry "
-        "stage, the segmentation's masks).",
+        "masks; 'recovered': a bench duplicates variant's (the default unless named in brackets: poses, "
+        "shared mesh through the geometry stage, the masks it was solved from).",
         "",
         format_table("Material and light, beside the paper's Tables 1 and 2", TABLE1_COLUMNS, lines),
     ]
@@ -398,11 +419,14 @@ def write_markdown(out: Path, report: dict) -> str:
 # ---------------------------------------------------------------------------------------------
 
 
-def run(quick: bool = False, out="docs/benchmarks", device: str | None = None, scenes=None, poses=None, work=None):
+def run(
+    quick: bool = False, out="docs/benchmarks", device: str | None = None, scenes=None, poses=None, work=None,
+    variants=None,
+):  # fmt: skip
     """Every scene x pose source through the chain (resuming in `work`), the tables under `out`."""
     quiet_pyopencl()
     started, load_start = time.time(), os.getloadavg()
-    settings = settings_from(quick, scenes, poses, work)
+    settings = settings_from(quick, scenes, poses, work, variants)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     Path(settings.work).mkdir(parents=True, exist_ok=True)
