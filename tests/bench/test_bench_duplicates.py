@@ -146,6 +146,7 @@ def test_scenes_and_variants():
     full = bench.settings_from(False, None, None, "work")
     assert full.variants["box-10-hd"] == [
         "default", "no-rotation-search", "sift", "tracks-subpixel", "provided-tracks-subpixel", "provided-track-search",
+        "asift", "provided-asift",
     ]  # fmt: skip
     assert full.variants["can-20-hd"] == ["default"]
     chosen = bench.settings_from(False, "box-20-hd,can-6-ci", "sift", None)

