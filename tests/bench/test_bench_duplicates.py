@@ -144,11 +144,8 @@ def test_scenes_and_variants():
     quick = bench.settings_from(True, None, None, None)
     assert quick.scenes == ["box-6-ci", "can-6-ci"] and all(v == ["default"] for v in quick.variants.values())
     full = bench.settings_from(False, None, None, "work")
-    assert full.variants["box-10-hd"] == [
-        "default", "no-rotation-search", "sift", "tracks-subpixel", "provided-tracks-subpixel", "provided-track-search",
-        "asift", "provided-asift",
-    ]  # fmt: skip
-    assert full.variants["can-20-hd"] == ["default"]
+    assert full.variants["box-10-hd"] == ["default", "no-rotation-search", "sift", "asift", "provided-asift-refine"]
+    assert full.variants["can-20-hd"] == ["provided-asift-refine"]
     chosen = bench.settings_from(False, "box-20-hd,can-6-ci", "sift", None)
     assert chosen.variants == {"box-20-hd": ["sift"], "can-6-ci": ["sift"]}
     with pytest.raises(SceneError, match="variants"):

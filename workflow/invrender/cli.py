@@ -959,8 +959,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dup.add_argument(
         "--variants",
-        help="comma-separated bench duplicates variants (default all on box-10-hd); bench duplicates-material: "
-        "the one whose poses are 'recovered' (default: default)",
+        help="comma-separated bench duplicates variants (default provided-asift-refine, the ablation on "
+        "box-10-hd); bench duplicates-material: the one whose poses are 'recovered' (default: default)",
     )
     dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
     render = p.add_argument_group("bench render")
