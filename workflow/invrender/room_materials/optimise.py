@@ -30,7 +30,7 @@ from ..materials.gram import gram_loss, gram_matrices
 from ..materials.retrieval import default_network
 from ..render.adjoint import backward, backward_seed
 from ..render.renderer import Renderer, pixel_requests
-from .init import pooled_parts, tied_albedo, tied_parts
+from .init import damped, pooled_parts, tied_albedo, tied_parts
 from .model import PartMaterial, RoomModel
 
 __all__ = ["Eq4Settings", "Views", "solve_lights", "light_renders", "Eq4"]
@@ -161,24 +161,6 @@ def solve_lights(
         if x is None:
             x, _ = nnls(a, b)
         out[np.ix_(np.flatnonzero(seen), c)] = x[:, None]
-    return out
-
-
-def l1_albedo(photo: np.ndarray, shading: np.ndarray) -> np.ndarray:
-    """argmin_a sum |a S - P| per channel over (n, 3) pixels: the median of P / S weighted by S.
-    Eq. 4's image term is this L1; its minimiser is robust where the photo has what the render
-    cannot (a glossy part's highlights: the bedroom's bed frame, ks 0.45, went 0.29 -> 0.65 for a
-    true 0.31 with the mean's sum P / sum S)."""
-    out = np.zeros(photo.shape[1])
-    for c in range(photo.shape[1]):
-        s, p = shading[:, c], photo[:, c]
-        keep = s > 1e-9
-        if not keep.any():
-            continue
-        ratio, weight = p[keep] / s[keep], s[keep]
-        order = np.argsort(ratio)
-        cumulative = np.cumsum(weight[order])
-        out[c] = ratio[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]
     return out
 
 
@@ -329,11 +311,14 @@ class Eq4:
                 continue
             pool = [j for j in self.pools.get(i, [i]) if self.materials[j].kind == "plain"]
             mask = np.any(self.part_masks[pool], axis=0)
-            self._set_colour(i, l1_albedo(target[mask], shading[mask]))
+            # A ratio of sums, not least squares: S is a Monte Carlo estimate, and sum S^2
+            # overestimates its square by the variance, while sum S is unbiased.
+            value = target[mask].sum(0) / np.maximum(shading[mask].sum(0), 1e-12)
+            self._set_colour(i, damped(mat.params["colour"].numpy(), value))
         for i, tied in self.ties.items():
-            value = tied_albedo(self.medians[i].numpy(), shading, self.part_masks, tied)
+            value = tied_albedo(self.medians[i].numpy(), target, shading, self.part_masks, tied)
             if value is not None:
-                self._set_colour(i, value)
+                self._set_colour(i, damped(self.materials[i].params["colour"].numpy(), value))
         self.sync()
 
     def _set_colour(self, i: int, value) -> None:
