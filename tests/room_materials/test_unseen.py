@@ -61,7 +61,13 @@ def fitted(tmp_path_factory):
     (fx, fy), (cx, cy) = camera.focal, camera.principal_point
     room = {
         "box": BOX,
-        "camera": {"width": 48, "height": 36, "params": [fx, fy, cx, cy], "R": camera.R.tolist(), "t": camera.t.tolist()},
+        "camera": {
+            "width": 48,
+            "height": 36,
+            "params": [fx, fy, cx, cy],
+            "R": camera.R.tolist(),
+            "t": camera.t.tolist(),
+        },
     }
     materials = {name: {"kd": kd, "ks": 0.04, "ka": 0.25} for name, kd in TRUTH.items()}
     scene = assemble_room(room, [], LIGHTS, materials, texels_per_meter=8)

@@ -32,7 +32,16 @@ from ..materials.retrieval import retrieve
 from ..render.renderer import Renderer, pixel_requests
 from .model import PartMaterial, RoomModel
 
-__all__ = ["plain", "seen_radiance", "shading_albedo", "retrieve_part", "tied_parts", "tied_albedo", "pooled_parts", "damped"]
+__all__ = [
+    "plain",
+    "seen_radiance",
+    "shading_albedo",
+    "retrieve_part",
+    "tied_parts",
+    "tied_albedo",
+    "pooled_parts",
+    "damped",
+]
 
 MIN_LIGHT_PIXELS = 4  # a light seen in fewer (eroded) photo pixels keeps the light stage's radiance
 
