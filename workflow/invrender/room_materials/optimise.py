@@ -58,10 +58,9 @@ class Eq4Settings:
     # the two trade colour freely wherever no emitter is seen (measured on the test room: a
     # light behind the camera went blue, 14/24/30 for a grey 9, and the walls orange).
     light_colour: str = "grey"
-    # Between the light solve and the Adam steps, each plain part's albedo is set to its
-    # least-squares value under the current shading (the photo over the render divided by the
-    # albedo, over the part's pixels): the exact minimiser of the image term's square for that
-    # part, as the light solve is for the lights. Without it, Adam's small steps on the albedo
+    # After the Adam steps, each plain part's albedo is moved halfway to the value that makes
+    # its rendered mean the photo's under the current shading (Eq4.albedo_step), as the light
+    # solve is exact for the lights. Without it, Adam's small steps on the albedo
     # and the exact light solve crawl along the albedo-light valley (measured: walls 0.57 -> 0.59
     # in 18 steps for a true 0.70).
     closed_form_albedo: bool = True
@@ -292,11 +291,16 @@ class Eq4:
         )
 
     def albedo_step(self) -> None:
-        """Each plain part's colour to sum P / sum S over its pixels, S the render over the
-        albedo (the shading, interreflections at the current albedos): the albedo that makes
-        the part's rendered mean the photo's. A ratio of sums, not least squares: S is a Monte
-        Carlo estimate, and sum S^2 overestimates its square by the variance (measured: a
-        least-squares 0.69 for a true 0.80 ceiling at 16 spp), while sum S is unbiased."""
+        """Each plain part's colour toward sum P / sum S over its pixels (over its pool's: the
+        seen walls, init.pooled_parts), S the render over the albedo (the shading,
+        interreflections at the current albedos): the albedo that makes the part's rendered
+        mean the photo's; then each unseen plain part from the parts it follows
+        (init.tied_albedo). A ratio of sums, not least squares: S is a Monte Carlo estimate,
+        and sum S^2 overestimates its square by the variance (measured: a least-squares 0.69
+        for a true 0.80 ceiling at 16 spp), while sum S is unbiased. Nor Eq. 4's L1 minimiser
+        (the S-weighted median of P / S, tried): biased on noisy S (the Eq. 4 test's ceiling
+        0.73 for 0.80). Halfway there (init.damped: the full step oscillates away from the
+        truth where a part lights itself much)."""
         small = self.views.cameras[0]
         mean = self.render(self.settings.light_spp, self.seed + 7 + 104729 * (self.step_count + 1))
         render = mean[self.views.slices[0]].reshape(small.height, small.width, 3).astype(np.float64)
@@ -312,8 +316,6 @@ class Eq4:
                 continue
             pool = [j for j in self.pools.get(i, [i]) if self.materials[j].kind == "plain"]
             mask = np.any(self.part_masks[pool], axis=0)
-            # A ratio of sums, not least squares: S is a Monte Carlo estimate, and sum S^2
-            # overestimates its square by the variance, while sum S is unbiased.
             value = target[mask].sum(0) / np.maximum(shading[mask].sum(0), 1e-12)
             self._set_colour(i, self._damped(i, value))
         for i, tied in self.ties.items():
