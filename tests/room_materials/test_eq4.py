@@ -41,7 +41,7 @@ def test_eq4_recovers_albedo_and_light_scale():
         masks,
         medians,
         [],
-        Eq4Settings(rounds=4, steps=2, spp=8, light_spp=32),
+        Eq4Settings(rounds=8, steps=1, spp=8, light_spp=32),
         seed=3,
     )
     before = eq.evaluate(16, 99)[1]["loss"]

@@ -100,13 +100,14 @@ def test_stage_writes_materials_and_lights_near_the_truth(capture):
     assert set(written["materials"]) == {"floor", "ceiling", "wall_mx", "wall_px", "wall_mz", "wall_pz"}
     for name, entry in written["materials"].items():
         truth = TRUTH["wall" if name.startswith("wall") else name]
-        if name in ("floor", "wall_mz", "wall_mx"):  # the parts the photo shows well
-            # Measured: within 0.075 (the walls' red 0.63 for 0.70: a bias docs/room-materials.md
-            # lists as open; the Eq. 4 test on its own room is within 0.018).
-            np.testing.assert_allclose(entry["kd"], truth, atol=0.1, err_msg=name)
+        # Measured: every wall (wall_pz behind the camera too) 0.709/0.616/0.511, the floor
+        # 0.309/0.358/0.565; the ceiling, lit by interreflection alone, 0.769/0.737/0.731 after
+        # these 4 rounds (the damped closed form converges there more slowly). Before the damped
+        # steps the walls drifted to 0.63 in red (0.51 once pooled), docs/room-materials.md.
+        np.testing.assert_allclose(entry["kd"], truth, atol=0.08 if name == "ceiling" else 0.03, err_msg=name)
         assert entry["ka"] == pytest.approx(0.25) and entry["ks"] == pytest.approx(0.04)
     radiance = [written["lights"][f"light_{q['name']}"]["radiance"][0] for q in LIGHTS["lights"]]
-    np.testing.assert_allclose(radiance, [6.0, 9.0], rtol=0.05)  # measured 6.08, 9.08
+    np.testing.assert_allclose(radiance, [6.0, 9.0], rtol=0.05)  # measured 6.02, 9.06
     lights = json.loads((out / "lights.json").read_text())
     assert [q["radiance"][0] for q in lights["lights"]] == pytest.approx(radiance, rel=1e-5)
     assert report["metrics"]["psnr_after"] > report["metrics"]["psnr_before"]

@@ -2,20 +2,25 @@
 truth (capture/truth: the scene and room.json) the albedo at the same 3D point and the lights'
 emitted power.
 
-Same 3D point: the estimate and the truth are each cast from the photo's camera (each in its own
-world: room_box's box is posed in a world of its own, docs/room.md); a pixel whose two depths
-(camera z) agree within DEPTH_TOLERANCE of the truth's sees one surface point in both, and there
-the estimate's kd (its texel at its hit) is compared with the truth's (its texel at its hit).
+Same 3D point: the estimate and the truth are each cast from the photo's camera in its own world
+(room_box's box is posed in a world of its own, docs/room.md: the truth scene's own camera, at the
+same size); a pixel whose two depths (camera z, the estimate's times room_box's truth_scale) agree
+within DEPTH_TOLERANCE of the truth's sees one surface point in both, and there the estimate's kd
+(its texel at its hit) is compared with the truth's (its texel at its hit). (Casting the truth
+from the estimate's camera, as this did first, found no common point on the office, whose box
+world is turned 90 degrees from the truth's.)
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..evaluate.appearance import albedo_errors
 from ..render.features import Features
 from ..render.renderer import Renderer, pixel_requests
 from ..render.scene_buffers import emitted_power
 from ..scene.atlas import texel_index
+from ..scene.cameras import resized_camera
 from ..scene.format import load_scene
 
 __all__ = ["psnr", "truth_metrics", "DEPTH_TOLERANCE"]
@@ -36,14 +41,15 @@ def _kd_at(renderer: Renderer, kd: np.ndarray, camera):
     return aov["depth"], kd[row, col], aov["triangle_id"]
 
 
-def truth_metrics(truth_dir, model, materials, radiance, renderer, camera, eval_cam, parts) -> dict:
+def truth_metrics(truth_dir, model, materials, radiance, renderer, eval_cam, parts, truth_scale: float = 1.0) -> dict:
     truth = load_scene(truth_dir / "scene")
     # AOVs only: the kernels' options do not change primary hits.
     truth_renderer = Renderer(truth, Features(specular=False, environment=False, window=False, env_sampling=False))
     maps = model.maps(materials, radiance)
-    depth_t, kd_t, _ = _kd_at(truth_renderer, truth.maps.kd, eval_cam)
+    depth_t, kd_t, _ = _kd_at(truth_renderer, truth.maps.kd, resized_camera(truth.cameras[0], eval_cam.width))
     renderer.set_maps(maps)
     depth_e, kd_e, tri_e = _kd_at(renderer, maps.kd, eval_cam)
+    depth_e = depth_e * truth_scale
     same = (depth_t > 0) & (depth_e > 0) & (np.abs(depth_e - depth_t) <= DEPTH_TOLERANCE * np.maximum(depth_t, 1e-9))
     part = model.part_ids(tri_e)
     error = np.abs(kd_e - kd_t).mean(axis=1)
@@ -67,6 +73,13 @@ def truth_metrics(truth_dir, model, materials, radiance, renderer, camera, eval_
     summary = {
         "kd_error": round(float(error[on_parts].mean()), 5) if on_parts.any() else None,
         "same_point_fraction": round(float(on_parts.mean()), 4),
+        # evaluate_room's albedo PSNR (per-channel scale) on these points, and the grey guess's
+        "albedo_psnr": round(albedo_errors(kd_e[on_parts], kd_t[on_parts])["psnr_db"], 3) if on_parts.any() else None,
+        "albedo_psnr_grey": (
+            round(albedo_errors(np.full_like(kd_t[on_parts], 0.5), kd_t[on_parts])["psnr_db"], 3)
+            if on_parts.any()
+            else None
+        ),
         "emitted_power_truth": round(power_t, 4),
         "emitted_power_estimate": round(float(power_e.sum()), 4),
         "emitted_power_estimate_without_windows": round(float(power_e[~windows].sum()), 4),
