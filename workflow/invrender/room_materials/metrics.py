@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluate.appearance import albedo_errors
 from ..render.features import Features
 from ..render.renderer import Renderer, pixel_requests
 from ..render.scene_buffers import emitted_power
@@ -73,13 +72,6 @@ def truth_metrics(truth_dir, model, materials, radiance, renderer, eval_cam, par
     summary = {
         "kd_error": round(float(error[on_parts].mean()), 5) if on_parts.any() else None,
         "same_point_fraction": round(float(on_parts.mean()), 4),
-        # evaluate_room's albedo PSNR (per-channel scale) on these points, and the grey guess's
-        "albedo_psnr": round(albedo_errors(kd_e[on_parts], kd_t[on_parts])["psnr_db"], 3) if on_parts.any() else None,
-        "albedo_psnr_grey": (
-            round(albedo_errors(np.full_like(kd_t[on_parts], 0.5), kd_t[on_parts])["psnr_db"], 3)
-            if on_parts.any()
-            else None
-        ),
         "emitted_power_truth": round(power_t, 4),
         "emitted_power_estimate": round(float(power_e.sum()), 4),
         "emitted_power_estimate_without_windows": round(float(power_e[~windows].sum()), 4),
