@@ -15,7 +15,7 @@ simulated camera tilts, so two copies that show a face foreshortened differently
 and one lying on its side, still match; rotation invariant by itself, so it has no search: its
 features are extracted at 0 degrees alone). On box-10-hd, pairs sharing a face that XFeat's
 search matched with 0 correct correspondences get 50-360 correct ones from ASIFT
-(docs/duplicates.md, "Matching over tilts").
+(docs/duplicates.md, "Matching").
 
 Pixels are COLMAP's (pixel (x, y) covers [x, x+1) x [y, y+1)). XFeat reports keypoints as pixel
 indices (the centre at integers): +0.5. OpenCV's SIFT reports them 0.25 px past the pixel index
@@ -201,13 +201,17 @@ def _sift_detect(images):
             unique = {(k.pt, k.size): k for k in kps}.values()
             kps = [cv2.KeyPoint(k.pt[0], k.pt[1], k.size, 0.0, k.response, k.octave) for k in unique]
         kps, desc = sift.compute(gray, kps) if kps else ((), None)
-        if not kps:
-            yield np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0, np.float32)
-            continue
-        xy = np.array([k.pt for k in kps], np.float64)
-        resp = np.array([k.response for k in kps], np.float32)
-        order = np.argsort(-resp, kind="stable")
-        yield xy[order], desc[order].astype(np.float32), resp[order]
+        yield _by_response(kps, desc)
+
+
+def _by_response(kps, desc, limit: int | None = None):
+    """OpenCV keypoints as (xy, descriptors, responses), most responsive first, at most ``limit``."""
+    if not kps:
+        return np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0, np.float32)
+    xy = np.array([k.pt for k in kps], np.float64)
+    resp = np.array([k.response for k in kps], np.float32)
+    order = np.argsort(-resp, kind="stable")[:limit]
+    return xy[order], desc[order].astype(np.float32), resp[order]
 
 
 @contextlib.contextmanager
@@ -254,14 +258,7 @@ def _asift_detect(images):
     steps of sqrt 2, and their rotations), most responsive first, at most ASIFT_MAX_KEYPOINTS."""
     asift = cv2.AffineFeature_create(cv2.SIFT_create())
     for gray, mask in images:
-        kps, desc = asift.detectAndCompute(gray, mask)
-        if not kps:
-            yield np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0, np.float32)
-            continue
-        xy = np.array([k.pt for k in kps], np.float64)
-        resp = np.array([k.response for k in kps], np.float32)
-        order = np.argsort(-resp, kind="stable")[:ASIFT_MAX_KEYPOINTS]
-        yield xy[order], desc[order].astype(np.float32), resp[order]
+        yield _by_response(*asift.detectAndCompute(gray, mask), ASIFT_MAX_KEYPOINTS)
 
 
 _DETECT = {"sift": _sift_detect, "xfeat": _xfeat_detect, "asift": _asift_detect}
