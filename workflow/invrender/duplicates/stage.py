@@ -74,6 +74,7 @@ class Settings:
     refine_rounds: int = 2
     hull_resolution: int = 96
     hull_faces: int = 4000
+    hull_outliers: int | None = None  # copies that may call a kept voxel outside; None: n // 10 (hull.py)
     object_size: float | None = None
     max_error_px: float = 2.0
     seed: int = 0
@@ -225,8 +226,9 @@ def _carve(ids, poses, K, points, settings: Settings) -> Mesh:
     best guess, else from the masks' cones."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
     mesh, _ = hull.visual_hull(
-        ids, poses, K, bounds, resolution=settings.hull_resolution, target_faces=settings.hull_faces
-    )
+        ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
+        target_faces=settings.hull_faces,
+    )  # fmt: skip
     return mesh
 
 
