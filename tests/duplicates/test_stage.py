@@ -96,3 +96,16 @@ def test_the_object_frame_moves_poses_with_the_mesh():
     p_cam = T[:3, :3] @ (centre + scale * p_obj) + T[:3, 3]
     T2 = stage.reframe(T, centre, scale)
     np.testing.assert_allclose(T2[:3, :3] @ p_obj + T2[:3, 3], p_cam / scale)
+
+
+def test_hull_outliers_reach_the_carve_and_default_to_a_tenth(monkeypatch):
+    """`hull_outliers` is the k of hull.carve (copies that may call a kept voxel outside); None
+    leaves hull.py's own default, a tenth of the copies."""
+    from invrender.duplicates import hull
+
+    seen = []
+    monkeypatch.setattr(hull, "visual_hull", lambda *a, k=None, **kw: (seen.append(k), (None, None))[1])
+    monkeypatch.setattr(hull, "bounds_from_masks", lambda *a: None)
+    for value in (0, None):
+        stage._carve(None, {}, None, np.zeros((0, 3)), settings(hull_outliers=value))
+    assert seen == [0, None] and hull.default_vote(20) == 2
