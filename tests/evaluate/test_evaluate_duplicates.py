@@ -130,6 +130,41 @@ def test_umeyama_recovers_a_similarity_and_the_robust_fit_sets_an_outlier_aside(
     assert list(np.flatnonzero(~inliers)) == [2] and s_fit == pytest.approx(s, rel=1e-12)
 
 
+def posed(rotations, rng) -> np.ndarray:
+    T = np.tile(np.eye(4), (len(rotations), 1, 1))
+    T[:, :3, :3] = rotations
+    T[:, :3, 3] = rng.uniform(-0.5, 0.5, (len(rotations), 3)) + [0.0, 0.0, 2.0]
+    return T
+
+
+def test_exact_poses_of_a_mesh_whose_centroid_is_elsewhere_score_no_translation_error():
+    # The recovered frame: the true one scaled by s, turned by Q and shifted by o (p = s Q p' + o),
+    # and its mesh is not the truth's, so its centroid c' is the true point p0 (2 cm from the true
+    # centroid), not the true centroid. The poses are exact: the error must be 0. Taking the true
+    # centroid for c' (the earlier protocol) charged every copy its 2 cm offset turned by its pose.
+    rng = np.random.default_rng(4)
+    T_true = posed(random_rotations(8, seed=5), rng)
+    s, Q, o = 1.7, random_rotations(1, seed=6)[0], np.array([0.1, -0.3, 0.2])
+    frame = np.eye(4)  # p_true = frame @ p_rec
+    frame[:3, :3], frame[:3, 3] = s * Q, o
+    T_rec = T_true @ frame
+    T_rec[:, :3, :] /= s  # T_obj2world of the recovered frame, the world scaled by 1 / s
+    centroid_true, p0 = np.array([0.0, 0.01, 0.0]), np.array([0.02, 0.01, 0.0])
+    c_rec = Q.T @ (p0 - o) / s
+    truth = {i: T for i, T in enumerate(T_true)}
+    recovered = {i: T for i, T in enumerate(T_rec)}
+    match = {i: i for i in truth}
+    out = dup.pose_metrics(truth, recovered, match, (centroid_true, c_rec), 0.1, None)
+    # within 1e-7 m: the weak pull towards the true centroid (1e-6 of a copy's weight, squared) moves p by ~1e-9
+    assert out["translation"]["error_m"]["max"] < 1e-7
+    assert np.allclose(out["translation"]["corresponding_point"], p0, atol=1e-7)
+    assert out["translation"]["centroid_offset_m"] == pytest.approx(0.02, abs=1e-7)
+    # the earlier protocol: the true centroid's centres against the recovered ones
+    centres_true = np.einsum("iab,b->ia", T_true[:, :3, :3], centroid_true) + T_true[:, :3, 3]
+    centres_rec = np.einsum("iab,b->ia", T_rec[:, :3, :3], c_rec) + T_rec[:, :3, 3]
+    assert dup.translation_metrics(centres_true, centres_rec, 0.1)["error_m"]["mean"] > 0.005
+
+
 # --- masks -------------------------------------------------------------------------------------
 
 
