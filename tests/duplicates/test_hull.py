@@ -14,7 +14,7 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from invrender.duplicates import hull, refine
+from invrender.duplicates import hull, refine, snap
 from invrender.scene.atlas import triangle_areas
 from invrender.scene.types import Mesh
 from invrender.synthesize.duplicates import make_duplicates, object_mesh
@@ -300,3 +300,32 @@ def test_the_hull_covers_the_masks_of_right_poses_only(cans):
                                   [np.zeros((1, 3)), np.ones((1, 1))]])  # fmt: skip
     single = refine.coverage(right, K, ids, one)
     assert single[3] < min(v for i, v in single.items() if i != 3) - 0.1, single
+
+
+def test_snapping_the_hull_onto_points_of_the_surface_halves_its_distance(cans):
+    # COLMAP's triangulated points stand in for: points of the true can with 0.05 % of its
+    # diagonal of noise, and 5 % of them wrong matches scattered 2 % off the surface
+    mesh, poses, K, ids = cans
+    result, _ = hull.visual_hull(ids, poses, K, hull.bounds_from_masks(ids, poses, K), resolution=128)
+    d = diagonal(mesh)
+    rng = np.random.default_rng(3)
+    points = samples(mesh, 3000, seed=5) + rng.normal(0.0, 0.0005 * d, (3000, 3))
+    wrong = rng.random(3000) < 0.05
+    points[wrong] += rng.normal(0.0, 0.02 * d, (int(wrong.sum()), 3))
+    snapped, report = snap.snap_to_points(result, points)
+    before, after = chamfer(result, mesh) / d, chamfer(snapped, mesh) / d
+    assert after < 0.6 * before, (
+        f"Chamfer {100 * before:.2f} -> {100 * after:.2f} % of the diagonal (measured 1.00 -> 0.51)"
+    )
+    assert closed_and_oriented(snapped) and report.residual_after < 0.6 * report.residual_before
+    # the wrong matches barely matter (measured 0.516 % with them, 0.512 % without)
+    alone, _ = snap.snap_to_points(result, points[~wrong])
+    assert abs(after - chamfer(alone, mesh) / d) < 0.1 * after
+
+
+def test_with_no_point_near_the_hull_snapping_keeps_it(cans):
+    mesh, poses, K, ids = cans
+    result, _ = hull.visual_hull(ids, poses, K, hull.bounds_from_masks(ids, poses, K), resolution=64)
+    far = np.full((100, 3), 10.0)
+    kept, report = snap.snap_to_points(result, far)
+    assert report is None and np.array_equal(kept.positions, result.positions)

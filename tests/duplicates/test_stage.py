@@ -109,3 +109,23 @@ def test_hull_outliers_reach_the_carve_and_default_to_a_tenth(monkeypatch):
     for value in (0, None):
         stage._carve(None, {}, None, np.zeros((0, 3)), settings(hull_outliers=value))
     assert seen == [0, None] and hull.default_vote(20) == 2
+
+
+def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
+    """With `hull_snap` the carve's mesh (here a sphere of radius 1.1 standing in for a hull) comes
+    back moved onto COLMAP's points (on the unit sphere), with what snap.py did; without, as carved."""
+    import trimesh
+
+    from invrender.duplicates import hull
+    from invrender.scene.types import Mesh
+
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=1.1)
+    carved = Mesh(positions=ball.vertices.astype(np.float32), faces=ball.faces.astype(np.int32), uvs=None)
+    monkeypatch.setattr(hull, "visual_hull", lambda *a, **kw: (carved, None))
+    directions = np.random.default_rng(0).normal(size=(2000, 3))
+    points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    kept, none = stage._carve(None, {}, None, points, settings())
+    snapped, report = stage._carve(None, {}, None, points, settings(hull_snap=True))
+    assert kept is carved and none is None
+    radius = np.linalg.norm(snapped.positions, axis=1)
+    assert np.abs(radius - 1.0).max() < 0.01 and report["points"] == 2000

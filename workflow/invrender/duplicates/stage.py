@@ -46,7 +46,7 @@ from ..scene.images import read_mask
 from ..scene.mesh_io import write_ply
 from ..scene.poses import write_poses
 from ..scene.types import Camera, Mesh, SceneError
-from . import adjust, hull, mapping, matching, refine, tracks
+from . import adjust, hull, mapping, matching, refine, snap, tracks
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
@@ -75,6 +75,7 @@ class Settings:
     hull_resolution: int = 96
     hull_faces: int = 4000
     hull_outliers: int | None = None  # copies that may call a kept voxel outside; None: n // 10 (hull.py)
+    hull_snap: bool = False  # the hull moved onto COLMAP's triangulated points (snap.py)
     object_size: float | None = None
     max_error_px: float = 2.0
     seed: int = 0
@@ -221,15 +222,19 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
     }
 
 
-def _carve(ids, poses, K, points, settings: Settings) -> Mesh:
+def _carve(ids, poses, K, points, settings: Settings) -> tuple[Mesh, dict | None]:
     """The visual hull of the posed masks; its bounds from COLMAP's points while they are the
-    best guess, else from the masks' cones."""
+    best guess, else from the masks' cones. With ``hull_snap``, the hull moved onto the points
+    (snap.py); the second value says what that did (None: not done)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
     mesh, _ = hull.visual_hull(
         ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
         target_faces=settings.hull_faces,
     )  # fmt: skip
-    return mesh
+    if not settings.hull_snap:
+        return mesh, None
+    mesh, report = snap.snap_to_points(mesh, points)
+    return mesh, None if report is None else report.as_dict()
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -262,7 +267,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     if settings.subpixel_rounds and registration.reconstruction is not None:
         subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
-    mesh = _carve(ids, registration.poses, K, registration.points, settings)
+    mesh, snapped = _carve(ids, registration.poses, K, registration.points, settings)
     coverage = refine.coverage(mesh, K, ids, registration.poses)
     doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
     if doubtful:
@@ -288,6 +293,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         "mesh": mesh,
         "rounds": rounds,
         "subpixel": subpixel,
+        "snap": snapped,
         "coverage": coverage,
         "timings": timings,
     }
@@ -361,7 +367,7 @@ def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings)
         if best is not None and residual >= best:
             break
         best, poses, unregistered = residual, result.poses, []
-        mesh = _carve(ids, poses, K, np.zeros((0, 3)), settings)
+        mesh, _ = _carve(ids, poses, K, np.zeros((0, 3)), settings)
     return poses, mesh, rounds
 
 
@@ -429,6 +435,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
         "pairs": found["pairs"],
         "refinement": found["rounds"],
         "subpixel": found["subpixel"],
+        "snap": found["snap"],
         "hull_coverage": {str(i): float(c) for i, c in sorted(found["coverage"].items())},
         "scale": note,
         "mesh": {"vertices": int(len(mesh.positions)), "faces": int(len(mesh.faces))},
