@@ -130,6 +130,37 @@ def test_the_support_plane_is_the_floor_the_copies_stand_on(captures):
     assert 0.0 <= offset <= 0.0025
 
 
+def test_texels_no_photograph_shows_keep_their_start(captures, tmp_path):
+    """Light bounces off texels the photograph does not show (the floor behind each copy, the
+    copies' undersides) onto pixels it does show, but their gradient must not train them: they
+    would soak up the residuals (the floor behind each copy took the copy's colours, ghosts once
+    the copies move). With the regularisers that act on kd off, each ends at its grey start
+    exactly, and the seen ones have moved."""
+    from invrender.duplicates_material.support import support_texels
+    from invrender.scene.first_guess import seen_texels
+
+    _, inputs = captures[6]
+    out = tmp_path / "material"
+    settings = {**TRAINING, "iterations": 8, "smoothness": 0.0}
+    stage.run(**inputs, out_dir=out, preset="ci", overrides=settings, progress=False)
+    ids = read_mask(inputs["masks_path"])
+    (camera,) = read_cameras(inputs["cameras_path"])
+    texels = AtlasTexels.load(inputs["geometry_dir"] / "atlas.npz")
+    poses = {
+        c.instance_id: c.transform
+        for c in placements(read_poses(inputs["poses_path"]), read_mesh(inputs["geometry_dir"] / "mesh.ply"), "object")
+    }
+    quad = support_texels(read_mesh(out / "support" / "mesh.ply", require_uvs=False), TRAINING["support_resolution"])
+    for kd, atlas, seen in (
+        (np.load(out / "maps.npz")["kd"], texels, seen_texels(texels, poses, camera, ids)),
+        (np.load(out / "support" / "maps.npz")["kd"], quad, seen_texels(quad, {0: np.eye(4)}, camera, ids)),
+    ):
+        unseen = atlas.mask & ~seen
+        assert unseen.sum() > 20 and seen.sum() > 20
+        assert np.abs(kd[unseen] - 0.5).max() < 1e-6, np.abs(kd[unseen] - 0.5).max()
+        assert np.abs(kd[seen] - 0.5).mean() > 0.02
+
+
 def test_images_without_a_mask_give_the_pixels_that_meet_the_objects(captures, tmp_path):
     """Two photographs of the pile (here: the same one twice, under two names): the second has no
     mask, so its object pixels are those whose primary ray meets a copy, about as many as the

@@ -103,9 +103,13 @@ class TexelMaterial(torch.nn.Module):
         pairs: dict[str, np.ndarray],
         sky_pairs: np.ndarray,
         ground: Ground | None = None,
+        seen: dict[str, np.ndarray] | None = None,
     ):
         super().__init__()
         self.ground = ground  # not a buffer: checkpoints hold the same state with and without it
+        # Per set, (H, W) 1 where a photograph shows the texel (first_guess.seen_texels), else 0;
+        # the render's gradient reaches only those (``surrogate``). Not a buffer either.
+        self.seen = {name: torch.from_numpy(np.asarray(m, np.float32)) for name, m in (seen or {}).items()}
         self.names = list(start)
         self.pairs = {name: torch.from_numpy(p) for name, p in pairs.items()}
         self.sky_pairs = torch.from_numpy(sky_pairs)
@@ -150,12 +154,19 @@ class TexelMaterial(torch.nn.Module):
 
     def surrogate(self, grads: dict[str, Atlas], kg_grad: np.ndarray) -> torch.Tensor:
         """sum(map * dLoss/dmap): its gradient with respect to the parameters is the chain rule
-        from the adjoint's map gradients."""
+        from the adjoint's map gradients. A texel no photograph shows (``seen``) gets none: light
+        it bounces onto what the photograph does show would make it a free variable that soaks
+        up the residuals (the support behind each copy took the copy's colours, which a user sees
+        as ghosts once the copies move); the regularisers alone move it, towards its neighbours."""
         total = (self.kg() * torch.from_numpy(np.asarray(kg_grad, np.float32))).sum()
         for name in self.names:
             m, g = self.maps(name), grads[name]
+            seen = self.seen.get(name)
             for key in ("kd", "ks", "ka"):
-                total = total + (m[key] * torch.from_numpy(np.asarray(getattr(g, key), np.float32))).sum()
+                grad = torch.from_numpy(np.asarray(getattr(g, key), np.float32))
+                if seen is not None:
+                    grad = grad * (seen[..., None] if grad.dim() == 3 else seen)
+                total = total + (m[key] * grad).sum()
         return total
 
     def regularisers(self, settings: dict) -> dict[str, torch.Tensor]:

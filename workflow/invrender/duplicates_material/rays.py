@@ -57,8 +57,7 @@ def pixel_pools(
     parts = {"object": [], "support": [], "object_target": [], "support_target": []}
     for k, (camera, image, ids) in enumerate(zip(cameras, images, masks)):
         requests = pixel_requests(camera, k, renderer.ray_offset(camera))
-        aovs = renderer.aovs(cameras, requests)
-        hit_id = np.where(aovs["triangle_id"] >= 0, aovs["instance_id"], -1)
+        hit_id = _hit_ids(renderer, cameras, requests)
         if ids is not None:
             labels = ids.reshape(-1).astype(np.int64)
             on_object = np.isin(labels, list(registered))
@@ -72,3 +71,21 @@ def pixel_pools(
         parts["object_target"].append(pixels[on_object])
         parts["support_target"].append(pixels[on_support])
     return RayPools(**{name: np.concatenate(values) for name, values in parts.items()})
+
+
+def _hit_ids(renderer, cameras, requests) -> np.ndarray:
+    """The instance id each request's primary ray hits (-1: nothing)."""
+    aovs = renderer.aovs(cameras, requests)
+    return np.where(aovs["triangle_id"] >= 0, aovs["instance_id"], -1)
+
+
+def instance_images(renderer, cameras: list[Camera], masks: list) -> list[np.ndarray]:
+    """Per camera its instance-id image: its mask, or without one what the scene's own primary
+    rays hit (-1: nothing), as ``pixel_pools`` labels its pixels."""
+    out = []
+    for k, (camera, ids) in enumerate(zip(cameras, masks)):
+        if ids is None:
+            requests = pixel_requests(camera, k, renderer.ray_offset(camera))
+            ids = _hit_ids(renderer, cameras, requests).reshape(camera.height, camera.width)
+        out.append(ids)
+    return out

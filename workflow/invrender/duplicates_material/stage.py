@@ -30,7 +30,7 @@ from ..scene.atlas import AtlasTexels
 from ..scene.atomic import atomic_path, check_output, claim_dir
 from ..scene.cameras import read_cameras
 from ..scene.capture import read_view
-from ..scene.first_guess import first_guess
+from ..scene.first_guess import first_guess, seen_texels
 from ..scene.images import read_mask, write_png_preview
 from ..scene.mesh_io import read_mesh, write_ply
 from ..scene.packing import pack_scene
@@ -40,7 +40,7 @@ from ..scene.training_log import TrainingLog
 from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
 from .material import F0, Ground, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
-from .rays import SUPPORT_ID, pixel_pools
+from .rays import SUPPORT_ID, instance_images, pixel_pools
 from .support import below_horizon, first_sky, irradiance_weights, support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training
 
@@ -135,6 +135,7 @@ def run(
     scene = pack_scene(objects, materials, kg, cameras)
     renderer = Renderer(scene, training_features(settings), device=device)
     pools = pixel_pools(renderer, cameras, images, masks, registered, support is not None)
+    seen = _seen(renderer, cameras, masks, copies, texels, support)
     if len(pools.object) == 0:
         raise SceneError(masks_path, "instances", "pixels of the registered copies in the images")
     below = below_horizon(n, None if support is None else support[0])
@@ -153,7 +154,7 @@ def run(
     median = float(max(np.median(pixels @ LUMINANCE), 1e-3))
     training = Training(
         settings,
-        TexelMaterial(materials, kg, pairs, sky_pairs, ground),
+        TexelMaterial(materials, kg, pairs, sky_pairs, ground, seen),
         renderer,
         scene.packing,
         cameras,
@@ -221,6 +222,18 @@ def _scene_parts(settings, copies, texels, cameras, images, masks):
         objects.append(support_object(quad))
         support = (quad, quad_texels)
     return objects, materials, support
+
+
+def _seen(renderer, cameras, masks, copies, texels, support) -> dict[str, np.ndarray]:
+    """Per set, the texels some image shows (first_guess.seen_texels over the images, each with
+    its mask or, without one, what the scene's own primary rays hit: rays.instance_images)."""
+    ids = instance_images(renderer, cameras, masks)
+    poses = {c.instance_id: c.transform for c in copies}
+    seen = {"object": np.logical_or.reduce([seen_texels(texels, poses, c, i) for c, i in zip(cameras, ids)])}
+    if support is not None:
+        whole = {SUPPORT_ID: np.eye(4)}
+        seen["support"] = np.logical_or.reduce([seen_texels(support[1], whole, c, i) for c, i in zip(cameras, ids)])
+    return seen
 
 
 def _grey(texels, *_) -> Atlas:

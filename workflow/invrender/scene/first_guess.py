@@ -16,7 +16,7 @@ from .atlas import AtlasTexels, dilate
 from .cameras import project_points
 from .types import Atlas
 
-__all__ = ["FIRST_GUESS", "SKY_CUBE", "first_guess"]
+__all__ = ["FIRST_GUESS", "SKY_CUBE", "first_guess", "seen_texels"]
 
 log = logging.getLogger(__name__)
 
@@ -27,21 +27,36 @@ FIRST_GUESS = (
 SKY_CUBE = 8
 
 
-def _seen_colours(texels: AtlasTexels, pose: np.ndarray, camera, photo, ids, instance_id: int):
-    """Per texel, the photograph's colour where this copy shows it (NaN where it does not)."""
+def _own_pixels(texels: AtlasTexels, pose: np.ndarray, camera, ids, instance_id: int):
+    """Flat indices of the texels this copy shows in the photograph, and their pixels x, y: facing
+    the camera, inside the image, on the copy's own pixel (not hidden by a neighbour)."""
     world = texels.position.reshape(-1, 3).astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
     normal = texels.normal.reshape(-1, 3).astype(np.float64) @ pose[:3, :3].T
     uv = project_points(camera, world)
-    out = np.full((len(world), 3), np.nan, np.float32)
     ok = texels.mask.reshape(-1) & np.isfinite(uv).all(axis=1)
     ok &= ((world - camera.center) * normal).sum(axis=1) < 0  # facing the camera
     x, y = np.floor(uv[ok]).astype(np.int64).T
     inside = (x >= 0) & (y >= 0) & (x < camera.width) & (y < camera.height)
     rows = np.flatnonzero(ok)[inside]
     x, y = x[inside], y[inside]
-    own = ids[y, x] == instance_id  # the copy's own pixel: not hidden by a neighbour
-    out[rows[own]] = photo[y[own], x[own]]
+    own = ids[y, x] == instance_id
+    return rows[own], x[own], y[own]
+
+
+def _seen_colours(texels: AtlasTexels, pose: np.ndarray, camera, photo, ids, instance_id: int):
+    """Per texel, the photograph's colour where this copy shows it (NaN where it does not)."""
+    rows, x, y = _own_pixels(texels, pose, camera, ids, instance_id)
+    out = np.full((texels.mask.size, 3), np.nan, np.float32)
+    out[rows] = photo[y, x]
     return out
+
+
+def seen_texels(texels: AtlasTexels, poses: dict, camera, ids) -> np.ndarray:
+    """(H, W) bool: the texels some copy shows in the photograph (``_own_pixels``)."""
+    seen = np.zeros(texels.mask.size, bool)
+    for i, T in poses.items():
+        seen[_own_pixels(texels, T, camera, ids, i)[0]] = True
+    return seen.reshape(texels.shape)
 
 
 def first_guess(texels: AtlasTexels, poses: dict, camera, photo, ids) -> Atlas:
