@@ -124,8 +124,8 @@ def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
     monkeypatch.setattr(hull, "visual_hull", lambda *a, **kw: (carved, None))
     directions = np.random.default_rng(0).normal(size=(2000, 3))
     points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    kept, none = stage._carve(None, {}, None, points, settings())
+    kept, plain = stage._carve(None, {}, None, points, settings())
     snapped, report = stage._carve(None, {}, None, points, settings(hull_snap=True))
-    assert kept is carved and none is None
+    assert kept is carved and plain == {"floor": None, "snap": None}
     radius = np.linalg.norm(snapped.positions, axis=1)
-    assert np.abs(radius - 1.0).max() < 0.01 and report["points"] == 2000
+    assert np.abs(radius - 1.0).max() < 0.01 and report["snap"]["points"] == 2000

@@ -93,6 +93,17 @@ VARIANTS = {
         "hull_outliers": 0,
         "hull_snap": True,
     },  # fmt: skip
+    # and first carved with the floor the copies rest on (floor.py): no silhouette carves under
+    # the face a copy stands on (box-10-hd's hull kept a 12 mm skirt there)
+    "provided-asift-floor": {
+        "masks": "provided",
+        "matcher": "asift",
+        "crop_size": 512,
+        "subpixel_rounds": 3,
+        "hull_outliers": 0,
+        "hull_floor": True,
+        "hull_snap": True,
+    },  # fmt: skip
 }
 # Where a variant's instance masks come from: the opencv backend on the photo (the default), or
 # the capture's instance-id image through the provided backend. Not a setting of the stage.

@@ -199,13 +199,15 @@ def _view_distance(sd, M, fx, ix, ny, nz) -> np.ndarray:
     return out
 
 
-def carve(ids, poses: dict, K, bounds, resolution: int = 128, k: int | None = None) -> HullGrid:
+def carve(ids, poses: dict, K, bounds, resolution: int = 128, k: int | None = None, floors=()) -> HullGrid:
     """The visual hull's field over ``bounds`` = (lo (3,), hi (3,)) in the object frame.
 
     ``ids``: (H, W) instance id image (0 = background); ``poses``: {instance id: T_cam_from_obj
     (4, 4)} of the instances that carve (ids without a pose only shield their pixels); ``K``: the
     one real camera's 3 x 3 intrinsics (COLMAP pixels); ``resolution``: voxels along the longest
-    side of the bounds; ``k``: instances allowed to disagree (default ``default_vote(n)``).
+    side of the bounds; ``k``: instances allowed to disagree (default ``default_vote(n)``);
+    ``floors``: planes (normal (3,), offset) in the object frame, each the support some copy
+    rests on: what lies below one (n . x < offset) is outside, whatever the vote (floor.py).
     """
     ids, poses, K, lo, hi = _check_inputs(ids, poses, K, bounds)
     k = default_vote(len(poses)) if k is None else int(k)
@@ -227,6 +229,10 @@ def carve(ids, poses: dict, K, bounds, resolution: int = 128, k: int | None = No
         distances = np.stack([_view_distance(sd, M, K[0, 0], ix, ny, nz) for sd, M in views])
         observed[ix] = np.isfinite(distances).sum(axis=0)
         kth = distances.min(axis=0) if k == 0 else np.partition(distances, k, axis=0)[k]
+        if len(floors):
+            centres = origin + spacing * np.stack(np.meshgrid(ix, np.arange(ny), np.arange(nz), indexing="ij"), -1)
+            above = np.min([centres @ np.asarray(n, np.float64) - d for n, d in floors], axis=0)
+            kth = np.minimum(kth, above.astype(np.float32))
         field[ix] = np.clip(kth, -clip, clip)
     return HullGrid(field=field, origin=origin, spacing=spacing, k=k, observed=observed)
 
@@ -324,6 +330,7 @@ def visual_hull(
     target_faces: int = DEFAULT_TARGET_FACES,
     smoothing_steps: int = 10,
     refit: bool = True,
+    floors=(),
 ) -> tuple[Mesh, HullGrid]:
     """``carve`` then ``hull_mesh``. With ``refit``, a coarse carve first shrinks loose bounds
     (COLMAP's points, or the masks' cones) to the hull plus two coarse voxels, so the fine grid
@@ -331,7 +338,7 @@ def visual_hull(
     if refit:
         coarse = carve(ids, poses, K, bounds, resolution=max(16, int(resolution) // 4), k=k)
         bounds = _refit_bounds(coarse, bounds)
-    grid = carve(ids, poses, K, bounds, resolution=resolution, k=k)
+    grid = carve(ids, poses, K, bounds, resolution=resolution, k=k, floors=floors)
     return hull_mesh(grid, target_faces=target_faces, smoothing_steps=smoothing_steps), grid
 
 

@@ -28,6 +28,7 @@ says which.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import logging
@@ -46,7 +47,7 @@ from ..scene.images import read_mask
 from ..scene.mesh_io import write_ply
 from ..scene.poses import write_poses
 from ..scene.types import Camera, Mesh, SceneError
-from . import adjust, hull, mapping, matching, refine, snap, tracks
+from . import adjust, floor, hull, mapping, matching, refine, snap, tracks
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
@@ -60,6 +61,9 @@ MIN_INSTANCES = 3  # two views give one relative pose and nothing to check it ag
 # it is wrong (box-10-hd: 0.24-0.65 on average; box-20-hd's copy at 67 degrees: 0.36): below this
 # the stage says that a copy's pose disagrees with the others'.
 MIN_COVERAGE = 0.8
+IMAGE_UP = np.array(
+    [0.0, -1.0, 0.0]
+)  # the camera frame's up for an upright photograph: where the floor's normal starts
 
 
 @dataclass
@@ -75,6 +79,7 @@ class Settings:
     hull_resolution: int = 96
     hull_faces: int = 4000
     hull_outliers: int | None = None  # copies that may call a kept voxel outside; None: n // 10 (hull.py)
+    hull_floor: bool = False  # the floor the copies rest on carves the hull too (floor.py)
     hull_snap: bool = False  # the hull moved onto COLMAP's triangulated points (snap.py)
     object_size: float | None = None
     max_error_px: float = 2.0
@@ -222,19 +227,26 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
     }
 
 
-def _carve(ids, poses, K, points, settings: Settings) -> tuple[Mesh, dict | None]:
+def _carve(ids, poses, K, points, settings: Settings) -> tuple[Mesh, dict]:
     """The visual hull of the posed masks; its bounds from COLMAP's points while they are the
-    best guess, else from the masks' cones. With ``hull_snap``, the hull moved onto the points
-    (snap.py); the second value says what that did (None: not done)."""
+    best guess, else from the masks' cones. With ``hull_floor``, carved again with the floor the
+    copies rest on (floor.py); with ``hull_snap``, moved onto the points (snap.py). The second
+    value says what those did ({"floor": ..., "snap": ...}, None where not done)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
-    mesh, _ = hull.visual_hull(
-        ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
+    carve = functools.partial(
+        hull.visual_hull, ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
         target_faces=settings.hull_faces,
     )  # fmt: skip
-    if not settings.hull_snap:
-        return mesh, None
-    mesh, report = snap.snap_to_points(mesh, points)
-    return mesh, None if report is None else report.as_dict()
+    mesh, _ = carve()
+    report = {"floor": None, "snap": None}
+    plane = floor.floor_plane(mesh, poses, IMAGE_UP) if settings.hull_floor else None
+    if plane is not None:
+        mesh, _ = carve(floors=floor.floors_in_object_frame(plane, poses))
+        report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}
+    if settings.hull_snap:
+        mesh, snapped = snap.snap_to_points(mesh, points)
+        report["snap"] = None if snapped is None else snapped.as_dict()
+    return mesh, report
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -267,7 +279,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     if settings.subpixel_rounds and registration.reconstruction is not None:
         subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
-    mesh, snapped = _carve(ids, registration.poses, K, registration.points, settings)
+    mesh, shaped = _carve(ids, registration.poses, K, registration.points, settings)
     coverage = refine.coverage(mesh, K, ids, registration.poses)
     doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
     if doubtful:
@@ -293,7 +305,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         "mesh": mesh,
         "rounds": rounds,
         "subpixel": subpixel,
-        "snap": snapped,
+        "shape": shaped,
         "coverage": coverage,
         "timings": timings,
     }
@@ -435,7 +447,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
         "pairs": found["pairs"],
         "refinement": found["rounds"],
         "subpixel": found["subpixel"],
-        "snap": found["snap"],
+        "hull_shape": found["shape"],
         "hull_coverage": {str(i): float(c) for i, c in sorted(found["coverage"].items())},
         "scale": note,
         "mesh": {"vertices": int(len(mesh.positions)), "faces": int(len(mesh.faces))},
