@@ -61,40 +61,10 @@ def ids_for(mesh: Mesh, poses: dict, K, extra=()) -> np.ndarray:
     return rasterize_ids(objects + list(extra), K, HEIGHT, WIDTH)
 
 
-def can_scene(count: int, seed: int = 0):
-    """The generator's cans at 640 x 480: (object mesh, {id: T_cam_from_obj}, K)."""
-    config = {
-        "seed": seed,
-        "count": count,
-        "camera": {"width": WIDTH, "height": HEIGHT},
-        "placement": {"extent": [0.6, 0.4]},
-        "floor": {"size": [1.2, 1.0]},
-    }
-    scene, metadata = make_duplicates(config)
-    camera = scene.cameras[0]
-    world_to_cam = np.eye(4)
-    world_to_cam[:3, :3], world_to_cam[:3, 3] = camera.R, camera.t
-    poses = {
-        p["instance_id"]: world_to_cam @ np.asarray(p["T_obj2world"], np.float64)
-        for p in metadata["poses"]["instances"]
-    }
-    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    return object_mesh(scene, metadata), poses, K
-
-
-def box_scene(count: int = 9, seed: int = 0):
-    """The generator's boxes at 640 x 480, upright, upside down and lying in turn, resting on the
-    floor (0-2 mm above it): (object mesh, {id: T_cam_from_obj}, K, the floor's up in the camera)."""
-    config = {
-        "seed": seed,
-        "count": count,
-        "object": {"kind": "box"},
-        "camera": {"width": WIDTH, "height": HEIGHT},
-        "placement": {"extent": [0.6, 0.4], "max_lift": 0.002, "orientations": ["upright", "upside_down", "lying"]},
-        "floor": {"size": [1.2, 1.0]},
-    }
-    scene, metadata = make_duplicates(config)
+def generated(config: dict):
+    """The generator's scene at 640 x 480 from ``config``: (object mesh, {id: T_cam_from_obj}, K,
+    the world's up in the camera frame)."""
+    scene, metadata = make_duplicates({**config, "camera": {"width": WIDTH, "height": HEIGHT}})
     camera = scene.cameras[0]
     world_to_cam = np.eye(4)
     world_to_cam[:3, :3], world_to_cam[:3, 3] = camera.R, camera.t
@@ -105,6 +75,21 @@ def box_scene(count: int = 9, seed: int = 0):
     (fx, fy), (cx, cy) = camera.focal, camera.principal_point
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     return object_mesh(scene, metadata), poses, K, np.asarray(camera.R, np.float64) @ [0.0, 1.0, 0.0]
+
+
+def can_scene(count: int, seed: int = 0):
+    """The generator's cans: (object mesh, {id: T_cam_from_obj}, K)."""
+    config = {"seed": seed, "count": count, "placement": {"extent": [0.6, 0.4]}, "floor": {"size": [1.2, 1.0]}}
+    return generated(config)[:3]
+
+
+def box_scene(count: int = 9, seed: int = 0):
+    """The generator's boxes, upright, upside down and lying in turn, resting on the floor (0-2 mm
+    above it): ``generated``'s four."""
+    placement = {"extent": [0.6, 0.4], "max_lift": 0.002, "orientations": ["upright", "upside_down", "lying"]}
+    return generated(
+        {"seed": seed, "count": count, "object": {"kind": "box"}, "placement": placement, "floor": {"size": [1.2, 1.0]}}
+    )
 
 
 @pytest.fixture(scope="module")
