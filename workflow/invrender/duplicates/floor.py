@@ -21,6 +21,7 @@ import logging
 
 import numpy as np
 
+from ..scene.resting import MIN_COPIES, contacts, resting_normal
 from ..scene.types import Mesh
 
 __all__ = ["floor_plane", "floors_in_object_frame"]
@@ -30,40 +31,18 @@ log = logging.getLogger(__name__)
 CONTACT = 0.005  # of the mesh's diagonal: vertices this close to a copy's lowest are its contact
 OUTLIER = 0.02  # of the diagonal: a contact this far below the median is a skirt's
 SLACK = 0.005  # of the diagonal: the floor is lowered by this much before it carves
-REFITS = 20
-MIN_COPIES = 3
-
-
-def _contacts(worlds: list[np.ndarray], normal: np.ndarray, tolerance: float) -> np.ndarray:
-    points = []
-    for world in worlds:
-        height = world @ normal
-        points.append(world[height <= height.min() + tolerance].mean(0))
-    return np.array(points)
 
 
 def floor_plane(mesh: Mesh, poses: dict, up) -> tuple[np.ndarray, float] | None:
     """(normal, offset) of the floor n . X = offset in the camera frame, n on the side of ``up``
-    (module docstring); None with fewer than MIN_COPIES copies (three contacts fix a plane)."""
+    (module docstring; the fit: scene/resting.py); None with fewer than three copies."""
     if len(poses) < MIN_COPIES:
         return None
     positions = np.asarray(mesh.positions, np.float64)
     diagonal = float(np.linalg.norm(np.ptp(positions, axis=0)))
     worlds = [positions @ T[:3, :3].T + T[:3, 3] for _, T in sorted(poses.items())]
-    normal = np.asarray(up, np.float64) / np.linalg.norm(up)
-    for _ in range(REFITS):
-        contacts = _contacts(worlds, normal, CONTACT * diagonal)
-        height = contacts @ normal
-        kept = contacts[height >= np.median(height) - OUTLIER * diagonal]
-        if len(kept) < MIN_COPIES:
-            break
-        fitted = np.linalg.svd(kept - kept.mean(0))[2][2]
-        fitted = fitted if fitted @ normal > 0 else -fitted
-        settled = fitted @ normal > 1 - 1e-12
-        normal = fitted
-        if settled:
-            break
-    height = _contacts(worlds, normal, CONTACT * diagonal) @ normal
+    normal = resting_normal(worlds, up, CONTACT * diagonal, OUTLIER * diagonal)
+    height = contacts(worlds, normal, CONTACT * diagonal) @ normal
     kept = height >= np.median(height) - OUTLIER * diagonal
     log.info(
         "floor: %d of %d copies' contacts fit it; %d left out, their lowest %.3g of the diagonal below it",

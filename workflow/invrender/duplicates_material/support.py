@@ -18,10 +18,10 @@ import numpy as np
 
 from ..scene.atlas import AtlasTexels, rasterize_atlas
 from ..scene.cubemap import cube_texel_solid_angles, texel_directions
+from ..scene.resting import resting_normal
 from ..scene.types import Camera, Mesh, SceneObject
 
 CONTACT_TOLERANCE = 1e-3  # fraction of the object's size: vertices this close to the lowest count as contact
-REFITS = 20
 
 
 def camera_up(cameras: list[Camera]) -> np.ndarray:
@@ -30,29 +30,12 @@ def camera_up(cameras: list[Camera]) -> np.ndarray:
     return up / np.linalg.norm(up)
 
 
-def _contacts(copies: list[np.ndarray], normal: np.ndarray, size: float) -> np.ndarray:
-    """One point per copy: the mean of its vertices lowest along `normal`."""
-    points = []
-    for world in copies:
-        height = world @ normal
-        points.append(world[height <= height.min() + CONTACT_TOLERANCE * size].mean(0))
-    return np.array(points)
-
-
 def support_plane(copies: list[np.ndarray], up: np.ndarray) -> tuple[np.ndarray, float]:
     """(normal, offset) of the plane n.x = offset the copies (world vertices, one array each)
-    rest on, the normal on the side of `up`."""
-    normal = np.asarray(up, np.float64) / np.linalg.norm(up)
+    rest on, the normal on the side of `up` (scene/resting.py); the offset that of the lowest
+    vertex, so no copy sinks into it."""
     size = float(np.linalg.norm(np.ptp(copies[0], axis=0)))
-    if len(copies) >= 3:
-        for _ in range(REFITS):
-            points = _contacts(copies, normal, size)
-            _, _, vt = np.linalg.svd(points - points.mean(0))
-            fitted = vt[2] if vt[2] @ up > 0 else -vt[2]
-            if np.linalg.norm(points - points.mean(0), axis=1).max() < 1e-9 or fitted @ normal > 1 - 1e-12:
-                normal = fitted
-                break
-            normal = fitted
+    normal = resting_normal(copies, up, CONTACT_TOLERANCE * size)
     offset = min(float((world @ normal).min()) for world in copies)
     return normal, offset
 
