@@ -61,9 +61,8 @@ MIN_INSTANCES = 3  # two views give one relative pose and nothing to check it ag
 # it is wrong (box-10-hd: 0.24-0.65 on average; box-20-hd's copy at 67 degrees: 0.36): below this
 # the stage says that a copy's pose disagrees with the others'.
 MIN_COVERAGE = 0.8
-IMAGE_UP = np.array(
-    [0.0, -1.0, 0.0]
-)  # the camera frame's up for an upright photograph: where the floor's normal starts
+# The camera frame's up for an upright photograph: where the fit of the floor's normal starts
+IMAGE_UP = np.array([0.0, -1.0, 0.0])
 
 
 @dataclass
