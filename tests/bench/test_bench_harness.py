@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import invrender.mitsuba as mb  # noqa: I001 - first: it points drjit at a usable libLLVM
-from invrender.bench.harness import time_at_rmse
+from invrender.bench.harness import portable, time_at_rmse
 from invrender.bench.render import EFFECT_SCENES, MITSUBA_SPLIT, MIXTURE, QUICK, scalar_settings, subdivide_mesh
 from invrender.cli import main
 from invrender.synthesize.room import make_room
@@ -168,3 +168,18 @@ def test_scalar_fallback_says_so(fallback_run):
     assert any("scalar_rgb" in note for note in fallback_run["notes"])
     assert fallback_run["equal_rmse"][0]["width"] == 16
     assert all(_finite_positive(row["ratio"]) for row in fallback_run["equal_rmse"])
+
+
+def test_a_report_names_its_folders_by_placeholder(tmp_path):
+    work, captures = tmp_path / "work", "/somewhere/captures"
+    report = {
+        "work": str(work),
+        "rows": [{"capture": f"{captures}/box-10-hd", "note": f"reused {captures}/box-10-hd (x.json)", "n": 3}],
+        "inputs": [str(work / "living" / "scene")],
+    }
+    out = portable(report, {str(work): "WORK", captures: "CAPTURES"})
+    assert out == {
+        "work": "WORK",
+        "rows": [{"capture": "CAPTURES/box-10-hd", "note": "reused CAPTURES/box-10-hd (x.json)", "n": 3}],
+        "inputs": ["WORK/living/scene"],
+    }

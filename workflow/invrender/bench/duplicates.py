@@ -164,6 +164,12 @@ def _render(preset: str, out: Path, spp: int):
     synthesize.run("duplicates", out, {"preset": preset}, spp=spp)
 
 
+def capture_roots() -> dict[str, str]:
+    """$INVRENDER_DUPLICATES_CAPTURES as the reports' placeholder CAPTURES (harness.portable)."""
+    folder = os.environ.get(REUSE_VARIABLE)
+    return {str(Path(folder).resolve()): "CAPTURES", folder: "CAPTURES"} if folder else {}
+
+
 def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, str]:
     """The capture of `preset`: an earlier render in $INVRENDER_DUPLICATES_CAPTURES if its config
     is exactly the preset's, else WORK/captures/<preset> (rendered now unless there). (folder,
@@ -431,5 +437,6 @@ def run(
 
     note = "the -ci fixtures (320 x 240), the default variant: checks the plumbing, not accuracy"
     return run_scenes(
-        "duplicates", settings, out, run_one, table_row, write_markdown, note, device, (started, load_start)
-    )
+        "duplicates", settings, out, run_one, table_row, write_markdown, note, device, (started, load_start),
+        capture_roots(),
+    )  # fmt: skip

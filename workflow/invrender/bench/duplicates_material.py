@@ -437,5 +437,6 @@ def run(
 
     note = "the -ci fixtures (320 x 240), the ci material preset: checks the plumbing, not accuracy"
     return run_scenes(
-        "duplicates-material", settings, out, run_one, table_row, write_markdown, note, device, (started, load_start)
-    )
+        "duplicates-material", settings, out, run_one, table_row, write_markdown, note, device,
+        (started, load_start), poses_bench.capture_roots(),
+    )  # fmt: skip

@@ -431,18 +431,38 @@ def write_report(out: Path, name: str, title: str, report: dict, tables: dict, s
     return table
 
 
-def run_scenes(name: str, settings, out: Path, run_one, table_row, write_markdown, quick_note: str, device, start):
-    """The scene loop of the per-scene benchmarks (bench duplicates, bench duplicates-material):
-    `run_one(scene) -> rows` for each of `settings.scenes`, the report (OUT/<name>.json, and the
-    markdown `write_markdown(out, report)` writes) rewritten after every scene so that partial
-    runs count, then printed. `start`: (time.time(), os.getloadavg()) when the benchmark began."""
+def portable(value, roots: dict[str, str]):
+    """``value`` (a report: dicts, lists, strings) with every folder of ``roots`` written as its
+    placeholder ({"/tmp/x/work": "WORK"}: "/tmp/x/work/living" -> "WORK/living"), so that a
+    committed report names no folder of the machine it ran on."""
+    if isinstance(value, dict):
+        return {key: portable(v, roots) for key, v in value.items()}
+    if isinstance(value, list):
+        return [portable(v, roots) for v in value]
+    if isinstance(value, str):
+        for folder in sorted(roots, key=len, reverse=True):
+            value = value.replace(folder, roots[folder])
+    return value
+
+
+def run_scenes(
+    name: str, settings, out: Path, run_one, table_row, write_markdown, quick_note: str, device, start, roots=None
+):
+    """The scene loop of the per-scene benchmarks (bench duplicates, bench duplicates-material,
+    bench room): `run_one(scene) -> rows` for each of `settings.scenes`, the report (OUT/<name>.json,
+    and the markdown `write_markdown(out, report)` writes) rewritten after every scene so that
+    partial runs count, then printed. `start`: (time.time(), os.getloadavg()) when the benchmark
+    began. Folders in the report are written as placeholders (``portable``): the work folder as
+    WORK, and ``roots`` ({folder: placeholder}) besides."""
     stem = name.replace("-", "_")
     rows = []
+    work = Path(settings.work)
+    roots = {str(work.resolve()): "WORK", str(work): "WORK", **(roots or {})}
 
     def write() -> dict:
         notes = [f"quick: {quick_note}"] if settings.mode == "quick" else []
-        results = {"work": settings.work, "rows": rows, "table": [table_row(row) for row in rows]}
-        report = run_report(name, settings, "not used", notes, *start, device, results)
+        results = {"work": "WORK", "rows": rows, "table": [table_row(row) for row in rows]}
+        report = portable(run_report(name, settings, "not used", notes, *start, device, results), roots)
         (out / f"{stem}.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
         write_markdown(out, report)
         return report
