@@ -433,8 +433,8 @@ def write_report(out: Path, name: str, title: str, report: dict, tables: dict, s
 
 def portable(value, roots: dict[str, str]):
     """``value`` (a report: dicts, lists, strings) with every folder of ``roots`` written as its
-    placeholder ({"/tmp/x/work": "WORK"}: "/tmp/x/work/living" -> "WORK/living"), so that a
-    committed report names no folder of the machine it ran on."""
+    placeholder ({work folder: "WORK"}: the work folder's "living" subfolder -> "WORK/living"), so
+    that a committed report names no folder of the machine it ran on."""
     if isinstance(value, dict):
         return {key: portable(v, roots) for key, v in value.items()}
     if isinstance(value, list):
