@@ -265,6 +265,30 @@ def test_icp_leaves_a_cans_twist_alone_when_told_its_axis():
     assert dup.twist_swing_deg(R[None], Y)[0][0] > 1.0
 
 
+def test_the_mesh_alignment_fits_the_true_faces_past_the_poses_offset_and_a_bulge():
+    """A hull-like recovery (the truth with a 6 mm bulge on a sixth of it) whose poses put its
+    frame 0.8 mm off: the trimmed shift lands the faces the bulge leaves on the truth."""
+    brick = box([-0.04, -0.05, -0.03], [0.04, 0.05, 0.03], cell=0.005)
+    truth = Mesh(positions=brick.positions, faces=brick.faces, uvs=None)
+    positions = np.asarray(truth.positions, np.float64).copy()
+    on_top = positions[:, 0] > 0.04 - 1e-9
+    positions[on_top, 0] += 0.006 * np.clip(1 - np.hypot(positions[on_top, 1], positions[on_top, 2]) / 0.03, 0, 1)
+    bulged = Mesh(positions=positions, faces=truth.faces, uvs=None)
+    off = np.array([0.0003, 0.0007, -0.0002])  # the poses' error in the frame's offset
+    centroids = (dup.surface_centroid(truth), dup.surface_centroid(bulged))
+    poses = {
+        "rotation": {"Q": np.eye(3).tolist()},
+        "translation": {"similarity": {"scale": 1.0}, "corresponding_point": (centroids[1] + off).tolist()},
+    }
+    mesh = dup.mesh_metrics(bulged, truth, poses, centroids, dup.diagonal_of(truth))
+    assert np.allclose(mesh["alignment"]["offset_from_poses"], off, atol=1e-12)
+    assert mesh["alignment"]["surface_shift_m"] == pytest.approx(np.linalg.norm(off), rel=1e-9)
+    assert np.linalg.norm(mesh["alignment"]["offset"]) < 1e-9  # 0.8 mm off -> exact
+    # an untrimmed fit is pulled towards the bulge (0.49 mm): the reason for trimming
+    _, t = dup.icp(dup.transformed(bulged, 1.0, np.eye(3), off), truth, rotate=False)
+    assert np.linalg.norm(off + t) > 3e-4
+
+
 # --- symmetry from the generator's metadata ---------------------------------------------------------
 
 
