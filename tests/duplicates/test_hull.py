@@ -332,6 +332,22 @@ def test_snapping_the_hull_onto_points_of_the_surface_halves_its_distance(cans):
     assert abs(after - chamfer(alone, mesh) / d) < 0.1 * after
 
 
+def test_a_second_pass_gives_the_points_near_a_boxs_edges_to_their_own_face():
+    # six boxes' hull (3.5 % of the diagonal off: faces no silhouette grazes bulge by millimetres)
+    # and 800 points of the true box: a point by an edge goes to the nearer bulging face's vertex
+    # and pulls it in; after one pass it finds its own face (measured 2.20 % for one pass at the
+    # old reach 0.03 and smoothness 0.25, 1.08 % at the defaults, 0.83 % with the second pass)
+    mesh, poses, K, _ = box_scene(6)
+    ids = ids_for(mesh, poses, K)
+    carved, _ = hull.visual_hull(ids, poses, K, hull.bounds_from_masks(ids, poses, K), resolution=96)
+    d = diagonal(mesh)
+    points = samples(mesh, 800, seed=5) + np.random.default_rng(3).normal(0.0, 0.0005 * d, (800, 3))
+    old = chamfer(snap.snap_to_points(carved, points, reach=0.03, smoothness=0.25, passes=1)[0], mesh) / d
+    one = chamfer(snap.snap_to_points(carved, points, passes=1)[0], mesh) / d
+    two = chamfer(snap.snap_to_points(carved, points)[0], mesh) / d
+    assert one < 0.6 * old and two < 0.85 * one, (old, one, two)
+
+
 def test_with_no_point_near_the_hull_snapping_keeps_it(cans):
     mesh, poses, K, ids = cans
     result, _ = hull.visual_hull(ids, poses, K, hull.bounds_from_masks(ids, poses, K), resolution=64)

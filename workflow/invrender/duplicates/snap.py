@@ -18,6 +18,13 @@ the parts no point reached (a face with no print), the small mu keeps those at t
 point is near. The weights w_j are Huber's on the residual (iteratively reweighted): a wrong
 match's point, triangulated off the surface, pulls with a bounded force. Points farther than
 ``reach`` from the hull along the normal are ignored: they belong to no surface of this hull.
+
+The fit runs twice (``PASSES``): a point near an edge of the true shape can belong to the wrong
+face's vertex while the hull still bulges (a box's +x print, nearest to a -z vertex of a hull 4 mm
+out on +x, pulls that face inwards); on the snapped mesh the points find their own face's
+vertices. Measured on the HD boxes' hulls (Chamfer of the diagonal, 10 / 6 / 20 copies): one
+pass at reach 0.03 and smoothness 0.25, 0.0076 / 0.0295 / 0.0036; at reach 0.06 and smoothness
+0.1, 0.0064 / 0.0212 / 0.0034; two passes of that, 0.0060 / 0.0209 / 0.0034.
 """
 
 from __future__ import annotations
@@ -36,8 +43,9 @@ __all__ = ["SnapReport", "snap_to_points", "vertex_normals"]
 
 log = logging.getLogger(__name__)
 
-REACH = 0.03  # of the hull's bounding-box diagonal: a point this far off the hull is not on it
-SMOOTHNESS = 0.25  # lam, in points: an edge holds its two offsets together like a quarter of a point
+REACH = 0.06  # of the hull's bounding-box diagonal: a point this far off the hull is not on it
+SMOOTHNESS = 0.1  # lam, in points: an edge holds its two offsets together like a tenth of a point
+PASSES = 2  # the points assigned again to the snapped mesh's vertices (module docstring)
 ANCHOR = 1e-3  # mu, in points: the hull where no point is near
 HUBER = 1.5  # Huber's threshold in robust standard deviations (1.4826 MAD) of the residuals
 ROUNDS = 4  # reweighting rounds
@@ -89,10 +97,22 @@ def _huber(residuals: np.ndarray) -> np.ndarray:
 
 
 def snap_to_points(
-    mesh: Mesh, points, reach: float = REACH, smoothness: float = SMOOTHNESS, anchor: float = ANCHOR
-) -> tuple[Mesh, SnapReport | None]:
-    """The mesh with every vertex moved along its normal onto the points (module docstring);
-    unchanged, with no report, when fewer than MIN_POINTS points lie within reach."""
+    mesh: Mesh, points, reach: float = REACH, smoothness: float = SMOOTHNESS, anchor: float = ANCHOR,
+    passes: int = PASSES,
+) -> tuple[Mesh, SnapReport | None]:  # fmt: skip
+    """The mesh with every vertex moved along its normal onto the points, ``passes`` times (module
+    docstring); unchanged, with no report, when fewer than MIN_POINTS points lie within reach.
+    The report is the last pass's."""
+    report = None
+    for _ in range(passes):
+        moved, last = _snap_once(mesh, points, reach, smoothness, anchor)
+        if last is None:
+            break
+        mesh, report = moved, last
+    return mesh, report
+
+
+def _snap_once(mesh: Mesh, points, reach: float, smoothness: float, anchor: float) -> tuple[Mesh, SnapReport | None]:
     positions = np.asarray(mesh.positions, np.float64)
     faces = np.asarray(mesh.faces, np.int64)
     points = np.asarray(points, np.float64).reshape(-1, 3)
