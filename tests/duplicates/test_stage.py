@@ -84,6 +84,8 @@ def test_an_unknown_setting_or_matcher_is_named():
         stage.settings_from({"colour_space": "srgb"})
     with pytest.raises(SceneError, match="matcher.*sift, xfeat.*'orb'"):
         stage.settings_from({"matcher": "orb"})
+    with pytest.raises(SceneError, match="hull_photo.*hull_snap true too"):
+        stage.settings_from({"hull_photo": True})
 
 
 def test_the_object_frame_moves_poses_with_the_mesh():
@@ -126,6 +128,6 @@ def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
     points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     kept, plain = stage._carve(None, {}, None, points, settings())
     snapped, report = stage._carve(None, {}, None, points, settings(hull_snap=True))
-    assert kept is carved and plain == {"floor": None, "snap": None}
+    assert kept is carved and plain == {"floor": None, "snap": None, "photo": None}
     radius = np.linalg.norm(snapped.positions, axis=1)
     assert np.abs(radius - 1.0).max() < 0.01 and report["snap"]["points"] == 2000

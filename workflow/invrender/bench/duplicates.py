@@ -104,6 +104,18 @@ VARIANTS = {
         "hull_floor": True,
         "hull_snap": True,
     },  # fmt: skip
+    # and snapped onto points where the copies' pixels agree too (photo.py), for the faces
+    # COLMAP's matches left without points
+    "provided-asift-photo": {
+        "masks": "provided",
+        "matcher": "asift",
+        "crop_size": 512,
+        "subpixel_rounds": 3,
+        "hull_outliers": 0,
+        "hull_floor": True,
+        "hull_snap": True,
+        "hull_photo": True,
+    },  # fmt: skip
 }
 # Where a variant's instance masks come from: the opencv backend on the photo (the default), or
 # the capture's instance-id image through the provided backend. Not a setting of the stage.

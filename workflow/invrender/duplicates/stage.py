@@ -47,7 +47,7 @@ from ..scene.images import read_mask
 from ..scene.mesh_io import write_ply
 from ..scene.poses import write_poses
 from ..scene.types import Camera, Mesh, SceneError
-from . import adjust, floor, hull, mapping, matching, refine, snap, tracks
+from . import adjust, floor, hull, mapping, matching, photo, refine, snap, tracks
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
@@ -80,6 +80,7 @@ class Settings:
     hull_outliers: int | None = None  # copies that may call a kept voxel outside; None: n // 10 (hull.py)
     hull_floor: bool = False  # the floor the copies rest on carves the hull too (floor.py)
     hull_snap: bool = False  # the hull moved onto COLMAP's triangulated points (snap.py)
+    hull_photo: bool = False  # with hull_snap, onto photo-consistent points too (photo.py)
     object_size: float | None = None
     max_error_px: float = 2.0
     seed: int = 0
@@ -226,26 +227,33 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
     }
 
 
-def _carve(ids, poses, K, points, settings: Settings) -> tuple[Mesh, dict]:
+def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, dict]:
     """The visual hull of the posed masks; its bounds from COLMAP's points while they are the
     best guess, else from the masks' cones. With ``hull_floor``, carved again with the floor the
-    copies rest on (floor.py); with ``hull_snap``, moved onto the points (snap.py). The second
-    value says what those did ({"floor": ..., "snap": ...}, None where not done)."""
+    copies rest on (floor.py); with ``hull_snap``, moved onto the points (snap.py), and with
+    ``hull_photo`` (and the photograph's ``gray``) moved again from the carved hull onto those and
+    the points where the copies' pixels agree about the snapped one (photo.py). The second value
+    says what those did ({"floor": ..., "snap": ..., "photo": ...}, None where not done)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
     carve = functools.partial(
         hull.visual_hull, ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
         target_faces=settings.hull_faces,
     )  # fmt: skip
     mesh, _ = carve()
-    report = {"floor": None, "snap": None}
+    report = {"floor": None, "snap": None, "photo": None}
     plane = floor.floor_plane(mesh, poses, IMAGE_UP) if settings.hull_floor else None
     if plane is not None:
         mesh, _ = carve(floors=floor.floors_in_object_frame(plane, poses))
         report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}
-    if settings.hull_snap:
-        mesh, snapped = snap.snap_to_points(mesh, points)
-        report["snap"] = None if snapped is None else snapped.as_dict()
-    return mesh, report
+    if not settings.hull_snap:
+        return mesh, report
+    snapped, how = snap.snap_to_points(mesh, points)
+    if settings.hull_photo and how is not None and gray is not None:
+        agreed, found = photo.consistent_points(snapped, poses, K, gray, ids)
+        report["photo"] = found.as_dict()
+        snapped, how = snap.snap_to_points(mesh, np.vstack([points, agreed]))
+    report["snap"] = None if how is None else how.as_dict()
+    return snapped, report
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -278,7 +286,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     if settings.subpixel_rounds and registration.reconstruction is not None:
         subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
-    mesh, shaped = _carve(ids, registration.poses, K, registration.points, settings)
+    mesh, shaped = _carve(ids, registration.poses, K, registration.points, settings, adjust.gray_image(photo))
     coverage = refine.coverage(mesh, K, ids, registration.poses)
     doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
     if doubtful:
@@ -467,6 +475,8 @@ def settings_from(values: dict) -> Settings:
     if settings.matcher not in matching.MATCHERS:
         allowed = ", ".join(matching.MATCHERS)
         raise SceneError("duplicates --set", "matcher", f"one of {allowed}, got {settings.matcher!r}")
+    if settings.hull_photo and not settings.hull_snap:
+        raise SceneError("duplicates --set", "hull_photo", "hull_snap true too (the photo's points are snapped onto)")
     if settings.track_size and settings.matcher != "xfeat":
         raise SceneError(
             "duplicates --set", "track_size", f"0 with the {settings.matcher} matcher (tracks.py is XFeat's)"
