@@ -39,6 +39,9 @@ REUSE_VARIABLE = "INVRENDER_DUPLICATES_CAPTURES"
 # The order they run in: the acceptance's scenes first (box, 10 and 20 copies), cans beside them.
 SCENES = ("box-10-hd", "can-10-hd", "box-20-hd", "can-20-hd", "box-6-hd")
 QUICK_SCENES = ("box-6-ci", "can-6-ci")  # 15 pairs each: matching, not the renders, costs the time
+# ASIFT on the capture's own instance masks (the renderer's instance AOV, given to the segment
+# stage's provided backend), 512-pixel crops, sub-pixel tracks: what the provided-asift-* share
+PROVIDED_ASIFT = {"masks": "provided", "matcher": "asift", "crop_size": 512, "subpixel_rounds": 3}
 VARIANTS = {
     # xfeat with the rotation search; refinement on, so that one run gives COLMAP's poses
     # (poses_colmap.json, "before") and the refined ones ("after"): the workflow's default is off
@@ -66,51 +69,21 @@ VARIANTS = {
     "asift": {"matcher": "asift", "crop_size": 512, "subpixel_rounds": 3, "refine": True},
     # from the capture's masks: with refinement (the poses before and after it) and without (the
     # workflow's default, refine off: the poses and hull bench duplicates-material recovers with)
-    "provided-asift-refine": {
-        "masks": "provided",
-        "matcher": "asift",
-        "crop_size": 512,
-        "subpixel_rounds": 3,
-        "refine": True,
-    },  # fmt: skip
-    "provided-asift": {"masks": "provided", "matcher": "asift", "crop_size": 512, "subpixel_rounds": 3},
+    "provided-asift-refine": {**PROVIDED_ASIFT, "refine": True},
+    "provided-asift": PROVIDED_ASIFT,
     # the same with the strict hull (no copy may disagree): with 0.15-degree poses a tenth of the
     # copies' tolerance only loosens it (box-10-hd's Chamfer 0.041 -> 0.017 of the diagonal)
-    "provided-asift-strict": {
-        "masks": "provided",
-        "matcher": "asift",
-        "crop_size": 512,
-        "subpixel_rounds": 3,
-        "hull_outliers": 0,
-    },  # fmt: skip
+    "provided-asift-strict": {**PROVIDED_ASIFT, "hull_outliers": 0},
     # and that hull moved onto COLMAP's triangulated points (snap.py): the shape the copies' pixels
     # agree on, where no silhouette reaches (box-20-hd's Chamfer 0.0098 -> 0.0039 of the diagonal)
-    "provided-asift-snap": {
-        "masks": "provided",
-        "matcher": "asift",
-        "crop_size": 512,
-        "subpixel_rounds": 3,
-        "hull_outliers": 0,
-        "hull_snap": True,
-    },  # fmt: skip
+    "provided-asift-snap": {**PROVIDED_ASIFT, "hull_outliers": 0, "hull_snap": True},
     # and first carved with the floor the copies rest on (floor.py): no silhouette carves under
     # the face a copy stands on (box-10-hd's hull kept a 12 mm skirt there)
-    "provided-asift-floor": {
-        "masks": "provided",
-        "matcher": "asift",
-        "crop_size": 512,
-        "subpixel_rounds": 3,
-        "hull_outliers": 0,
-        "hull_floor": True,
-        "hull_snap": True,
-    },  # fmt: skip
+    "provided-asift-floor": {**PROVIDED_ASIFT, "hull_outliers": 0, "hull_floor": True, "hull_snap": True},
     # and snapped onto points where the copies' pixels agree too (photo.py), for the faces
     # COLMAP's matches left without points
     "provided-asift-photo": {
-        "masks": "provided",
-        "matcher": "asift",
-        "crop_size": 512,
-        "subpixel_rounds": 3,
+        **PROVIDED_ASIFT,
         "hull_outliers": 0,
         "hull_floor": True,
         "hull_snap": True,
