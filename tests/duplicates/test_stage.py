@@ -113,6 +113,18 @@ def test_hull_outliers_reach_the_carve_and_default_to_a_tenth(monkeypatch):
     assert seen == [0, None] and hull.default_vote(20) == 2
 
 
+def test_poses_that_leave_no_voxel_stop_with_the_setting_to_change(monkeypatch):
+    from invrender.duplicates import hull
+
+    def empty(*args, **kwargs):
+        raise hull.EmptyHull("hull_mesh: the hull is empty")
+
+    monkeypatch.setattr(hull, "visual_hull", empty)
+    poses = {1: np.eye(4), 2: np.eye(4), 3: np.eye(4)}
+    with pytest.raises(SceneError, match=r"duplicates.*hull.*3 posed copies.*hull_outliers 0.*hull_outliers null"):
+        stage._carve(None, poses, None, np.ones((30, 3)) * np.arange(30)[:, None], settings(hull_outliers=0))
+
+
 def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
     """With `hull_snap` the carve's mesh (here a sphere of radius 1.1 standing in for a hull) comes
     back moved onto COLMAP's points (on the unit sphere), with what snap.py did; without, as carved."""

@@ -42,6 +42,7 @@ from skimage.measure import marching_cubes
 from ..scene.types import Mesh
 
 __all__ = [
+    "EmptyHull",
     "HullGrid",
     "carve",
     "hull_mesh",
@@ -267,6 +268,10 @@ def _topology(ms: pymeshlab.MeshSet) -> dict:
     return {key: int(m[key]) for key in ("boundary_edges", "non_two_manifold_edges", "connected_components_number")}
 
 
+class EmptyHull(ValueError):
+    """Every voxel was carved: the poses, masks or bounds disagree (the caller says which input)."""
+
+
 def hull_mesh(
     grid: HullGrid,
     target_faces: int = DEFAULT_TARGET_FACES,
@@ -276,7 +281,7 @@ def hull_mesh(
     Taubin smoothing (no shrinkage, unlike plain Laplacian), quadric simplification to
     ``target_faces``; watertight, faces wound counter-clockwise seen from outside."""
     if not np.any(grid.field > 0):
-        raise ValueError("hull_mesh: the hull is empty: every voxel was carved (poses, masks or bounds disagree)")
+        raise EmptyHull("hull_mesh: the hull is empty: every voxel was carved (poses, masks or bounds disagree)")
     # one carved layer all round closes the surface where the hull meets the bounds
     clip = CLIP_VOXELS * grid.spacing
     padded = np.pad(grid.field, 1, constant_values=-clip)

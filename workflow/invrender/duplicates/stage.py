@@ -239,7 +239,16 @@ def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, 
         hull.visual_hull, ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
         target_faces=settings.hull_faces,
     )  # fmt: skip
-    mesh, _ = carve()
+    try:
+        mesh, _ = carve()
+    except hull.EmptyHull:
+        raise SceneError(
+            "duplicates",
+            "hull",
+            f"a visual hull inside the masks of the {len(poses)} posed copies; every voxel lies outside some "
+            f"copy's mask (hull_outliers {settings.hull_outliers}): their poses disagree (rough poses need "
+            "hull_outliers null, a tenth of the copies)",
+        ) from None
     report = {"floor": None, "snap": None, "photo": None}
     plane = floor.floor_plane(mesh, poses, IMAGE_UP) if settings.hull_floor else None
     if plane is not None:
