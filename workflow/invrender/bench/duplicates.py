@@ -86,7 +86,8 @@ VARIANTS = {
     # COLMAP's matches left without points
     "provided-asift-photo": PHOTO,
     # and COLMAP's reprojection error bound halved (mapping.py): with six copies a few loose tracks
-    # tilt a copy (box-6-hd's copy 2: 3.0 -> 0.96 degrees)
+    # tilt a copy (box-6-hd: 1.02 -> 0.48 degrees mean), but box-10-hd's go 0.15 -> 0.34 degrees and
+    # box-20-hd's copies are lost: a per-photograph setting, not the headline (docs/benchmarks.md)
     "provided-asift-photo-tight": {**PHOTO, "max_error_px": 1.0},
 }
 # Where a variant's instance masks come from: the opencv backend on the photo (the default), or
