@@ -512,7 +512,7 @@ def mesh_metrics(
 ) -> dict | None:
     """Chamfer of the recovered mesh in the true object frame (p = s Q p' + o: s and Q from
     ``poses``, ``pose_metrics``'s result, o from them and then the surface, module docstring 4.),
-    before and after a full rigid ICP (no twist about a symmetry ``axis``); None without a
+    before and after a rigid trimmed ICP (no twist about a symmetry ``axis``); None without a
     rotation and a similarity."""
     if poses.get("rotation") is None or poses.get("translation") is None:
         return None
