@@ -250,7 +250,7 @@ def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, 
             "hull_outliers null, a tenth of the copies)",
         ) from None
     report = {"floor": None, "snap": None, "photo": None}
-    plane = floor.floor_plane(mesh, poses, IMAGE_UP) if settings.hull_floor else None
+    plane = floor.floor_plane(mesh, poses, IMAGE_UP, points) if settings.hull_floor else None
     if plane is not None:
         mesh, _ = carve(floors=floor.floors_in_object_frame(plane, poses))
         report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}

@@ -20,23 +20,28 @@ REFITS = 20
 MIN_COPIES = 3
 
 
-def contacts(worlds: list[np.ndarray], normal: np.ndarray, tolerance: float) -> np.ndarray:
-    """One point per copy (world vertices, one array each): the mean of its vertices within
-    ``tolerance`` of its lowest along ``normal``."""
+def contacts(worlds: list[np.ndarray], normal: np.ndarray, tolerance: float, trim: float = 0.0) -> np.ndarray:
+    """One point per copy (world vertices or points, one array each): the mean of its points within
+    ``tolerance`` of its lowest along ``normal``, the lowest ``trim`` share of them left out first
+    (a few points triangulated off the surface must not set the contact)."""
     points = []
     for world in worlds:
         height = world @ normal
-        points.append(world[height <= height.min() + tolerance].mean(0))
+        lowest = np.quantile(height, trim, method="higher") if trim > 0 else height.min()
+        near = (height >= lowest) & (height <= lowest + tolerance)
+        points.append(world[near].mean(0))
     return np.array(points)
 
 
-def resting_normal(worlds: list[np.ndarray], up, tolerance: float, outlier: float | None = None) -> np.ndarray:
+def resting_normal(
+    worlds: list[np.ndarray], up, tolerance: float, outlier: float | None = None, trim: float = 0.0
+) -> np.ndarray:
     """The unit normal of the plane the copies rest on, on the side of ``up`` (module docstring)."""
     normal = np.asarray(up, np.float64) / np.linalg.norm(up)
     if len(worlds) < MIN_COPIES:
         return normal
     for _ in range(REFITS):
-        points = contacts(worlds, normal, tolerance)
+        points = contacts(worlds, normal, tolerance, trim)
         if outlier is not None:
             height = points @ normal
             points = points[height >= np.median(height) - outlier]
