@@ -17,6 +17,7 @@ HELPER_DIRS = (
     "import_",
     "fuzz",
     "milo",
+    "duplicates",
     "duplicates_material",
     "materials",
     "room_box",

@@ -30,7 +30,7 @@ def test_patch_shifts_recover_a_known_subpixel_shift(texture):
     # the target patch starts where the shift is unknown: at the reference's pixels moved by it
     # the other way, so the shift found must be the true one
     targets = refs - true[:, None]
-    shift, ncc = adjust._shifts(texture, refs, targets, adjust.ITERATIONS)
+    shift, ncc = adjust.patch_shifts(texture, refs, targets, adjust.ITERATIONS)
     np.testing.assert_allclose(shift, true, atol=0.03)
     assert ncc.min() > 0.99
 

@@ -86,6 +86,9 @@ def test_an_unknown_setting_or_matcher_is_named():
         stage.settings_from({"matcher": "orb"})
     with pytest.raises(SceneError, match="hull_photo.*hull_snap true too"):
         stage.settings_from({"hull_photo": True})
+    with pytest.raises(SceneError, match="photo_tracks.*hull_photo true and subpixel_rounds > 0 too"):
+        stage.settings_from({"hull_snap": True, "hull_photo": True, "photo_tracks": True})
+    assert stage.settings_from({"hull_snap": True, "hull_photo": True, "subpixel_rounds": 1, "photo_tracks": True})
 
 
 def test_the_object_frame_moves_poses_with_the_mesh():

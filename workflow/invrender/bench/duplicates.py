@@ -85,6 +85,9 @@ VARIANTS = {
     # and snapped onto points where the copies' pixels agree too (photo.py), for the faces
     # COLMAP's matches left without points
     "provided-asift-photo": PHOTO,
+    # and those points made tracks in every copy that sees them, the copies adjusted again
+    # (extend.py): a copy that COLMAP's matches saw on one face only is held by the others' print
+    "provided-asift-tracks": {**PHOTO, "photo_tracks": True},
     # and COLMAP's reprojection error bound halved (mapping.py): with six copies a few loose tracks
     # tilt a copy (box-6-hd: 1.02 -> 0.48 degrees mean), but box-10-hd's go 0.15 -> 0.34 degrees and
     # box-20-hd's copies are lost: a per-photograph setting, not the headline (docs/benchmarks.md)

@@ -67,7 +67,7 @@ def gray_image(photo: np.ndarray) -> np.ndarray:
     return linear_to_srgb(np.clip(lum / level if level > 0 else lum, 0.0, None)).astype(np.float64)
 
 
-def _sample(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
+def sample_bilinear(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Bilinear samples at COLMAP pixel coordinates (pixel x covers [x, x + 1))."""
     return map_coordinates(image, [xy[..., 1] - 0.5, xy[..., 0] - 0.5], order=1, mode="nearest")
 
@@ -76,30 +76,30 @@ def _cam_from_world(reconstruction) -> dict[int, np.ndarray]:
     return {i: reconstruction.image(i).cam_from_world().matrix() for i in reconstruction.reg_image_ids()}
 
 
-def _patches(reconstruction, K: np.ndarray, half: int):
-    """Per observation of every track except its reference: the reference patch's pixels, the
-    same surface points projected into the observation's image (centred on its keypoint), and
-    the observation's (image_id, point2D_idx)."""
+def patch_grid(half: int) -> np.ndarray:
+    """Pixel offsets (P, 2) of a (2 half + 1)^2 patch, row by row; its centre is entry P // 2."""
+    return np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1).reshape(-1, 2)
+
+
+def reference_surfaces(reconstruction, K: np.ndarray, half: int):
+    """Per track of the model: (point id, its observations [(image_id, point2D_idx)], the
+    reference observation, the reference patch's pixels (P, 2), the same pixels as points of the
+    track's local plane (P, 3), that plane's normal turned towards the reference camera). The
+    plane: the 3D point and the normal of its NEIGHBOURS nearest model points; the reference: the
+    observation that sees the plane most frontally."""
     ids = list(reconstruction.point3D_ids())
     points = np.array([reconstruction.point3D(i).xyz for i in ids]).reshape(-1, 3)
     if len(points) < 4:
-        return np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), []
+        return
     _, near = cKDTree(points).query(points, k=min(NEIGHBOURS, len(points)))
     poses = _cam_from_world(reconstruction)
-    grid = np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1).reshape(-1, 2)
+    grid = patch_grid(half)
     K_inv = np.linalg.inv(K)
-    refs, targets, handles = [], [], []
     for k, point_id in enumerate(ids):
         local = points[near[k]] - points[near[k]].mean(axis=0)
         normal, X0 = np.linalg.svd(local)[2][-1], points[k]
         observations = [(e.image_id, e.point2D_idx) for e in reconstruction.point3D(point_id).track.elements]
-
-        def frontal(obs):  # |cos| between the plane's normal and the ray, in that copy's camera
-            R, t = poses[obs[0]][:, :3], poses[obs[0]][:, 3]
-            ray = R @ X0 + t
-            return abs((R @ normal) @ ray) / np.linalg.norm(ray)
-
-        ref = max(observations, key=frontal)
+        ref = max(observations, key=lambda obs: abs(facing(poses[obs[0]], normal, X0)))
         R, t = poses[ref[0]][:, :3], poses[ref[0]][:, 3]
         pixels = np.asarray(reconstruction.image(ref[0]).points2D[ref[1]].xy, np.float64) + grid
         # the reference's pixels as rays (pinhole: u = K X; pixel centres in COLMAP's convention
@@ -107,29 +107,55 @@ def _patches(reconstruction, K: np.ndarray, half: int):
         rays = (np.c_[pixels, np.ones(len(pixels))] @ K_inv.T) @ R  # world directions
         centre = -R.T @ t
         surface = centre + ((normal @ (X0 - centre)) / (rays @ normal))[:, None] * rays
+        normal = normal if facing(poses[ref[0]], normal, X0) > 0 else -normal
+        yield point_id, observations, ref, pixels, surface, normal
+
+
+def facing(pose: np.ndarray, normal: np.ndarray, X0: np.ndarray) -> float:
+    """Cosine between ``normal`` at X0 and the direction from X0 to the camera of ``pose``
+    (3 x 4 cam_from_world): positive where the camera sees that side of the plane."""
+    R, t = pose[:, :3], pose[:, 3]
+    ray = R @ X0 + t
+    return float(-(R @ normal) @ ray / np.linalg.norm(ray))
+
+
+def project_pixels(pose: np.ndarray, K: np.ndarray, points: np.ndarray) -> np.ndarray:
+    cam = points @ pose[:, :3].T + pose[:, 3]
+    return cam[:, :2] / cam[:, 2:] * np.diag(K)[:2] + K[:2, 2]
+
+
+def _patches(reconstruction, K: np.ndarray, half: int):
+    """Per observation of every track except its reference: the reference patch's pixels, the
+    same surface points projected into the observation's image (centred on its keypoint), and
+    the observation's (image_id, point2D_idx)."""
+    poses = _cam_from_world(reconstruction)
+    centre = len(patch_grid(half)) // 2
+    refs, targets, handles = [], [], []
+    for _, observations, ref, pixels, surface, _ in reference_surfaces(reconstruction, K, half):
         for obs in observations:
             if obs == ref:
                 continue
-            cam = surface @ poses[obs[0]][:, :3].T + poses[obs[0]][:, 3]
-            projected = cam[:, :2] / cam[:, 2:] * np.diag(K)[:2] + K[:2, 2]
+            projected = project_pixels(poses[obs[0]], K, surface)
             keypoint = np.asarray(reconstruction.image(obs[0]).points2D[obs[1]].xy, np.float64)
             refs.append(pixels)
-            targets.append(projected - projected[len(grid) // 2] + keypoint)
+            targets.append(projected - projected[centre] + keypoint)
             handles.append(obs)
+    if not handles:
+        return np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), []
     return np.array(refs), np.array(targets), handles
 
 
-def _shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray, iterations: int):
+def patch_shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray, iterations: int):
     """Per observation, the shift of its warped patch that best matches the reference patch up
     to gain and offset, and the normalised correlation there."""
     grad_y, grad_x = np.gradient(gray)
-    reference = _sample(gray, refs)
+    reference = sample_bilinear(gray, refs)
     reference -= reference.mean(axis=1, keepdims=True)
     reference_norm = np.linalg.norm(reference, axis=1) + 1e-12
     shift = np.zeros((len(targets), 2))
     for _ in range(iterations):
         at = targets + shift[:, None]
-        values, gx, gy = (_sample(image, at) for image in (gray, grad_x, grad_y))
+        values, gx, gy = (sample_bilinear(image, at) for image in (gray, grad_x, grad_y))
         values, gx, gy = (v - v.mean(axis=1, keepdims=True) for v in (values, gx, gy))
         gain = np.linalg.norm(values, axis=1) / reference_norm
         residual = values - gain[:, None] * reference
@@ -137,7 +163,7 @@ def _shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray, iterations:
         normal = np.einsum("npi,npj->nij", J, J) + 1e-12 * np.eye(2)
         step = -np.linalg.solve(normal, np.einsum("npi,np->ni", J, residual)[..., None])[..., 0]
         shift += np.clip(step, -0.5, 0.5)  # Gauss-Newton, damped: patches are small
-    values = _sample(gray, targets + shift[:, None])
+    values = sample_bilinear(gray, targets + shift[:, None])
     values -= values.mean(axis=1, keepdims=True)
     ncc = (values * reference).sum(axis=1) / (np.linalg.norm(values, axis=1) * reference_norm + 1e-12)
     return shift, ncc
@@ -148,7 +174,7 @@ def align_tracks(reconstruction, gray: np.ndarray, K: np.ndarray, half: int = HA
     refs, targets, handles = _patches(reconstruction, K, half)
     if not handles:
         return AlignStats(0, 0, 0.0)
-    shift, ncc = _shifts(gray, refs, targets, ITERATIONS)
+    shift, ncc = patch_shifts(gray, refs, targets, ITERATIONS)
     good = (np.abs(shift).max(axis=1) < MAX_SHIFT_PX) & (ncc > MIN_NCC)
     for (image_id, index), delta in zip((h for h, g in zip(handles, good) if g), shift[good]):
         point = reconstruction.image(image_id).points2D[index]

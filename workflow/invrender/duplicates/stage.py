@@ -47,7 +47,7 @@ from ..scene.images import read_mask
 from ..scene.mesh_io import write_ply
 from ..scene.poses import write_poses
 from ..scene.types import Camera, Mesh, SceneError
-from . import adjust, floor, hull, mapping, matching, photo, refine, snap, tracks
+from . import adjust, extend, floor, hull, mapping, matching, photo, refine, snap, tracks
 from .crops import Crop, instance_boxes, make_crop
 from .figures import write_overlay
 
@@ -81,6 +81,7 @@ class Settings:
     hull_floor: bool = False  # the floor the copies rest on carves the hull too (floor.py)
     hull_snap: bool = False  # the hull moved onto COLMAP's triangulated points (snap.py)
     hull_photo: bool = False  # with hull_snap, onto photo-consistent points too (photo.py)
+    photo_tracks: bool = False  # with hull_photo: those points made tracks, the copies adjusted again (extend.py)
     object_size: float | None = None
     max_error_px: float = 2.0
     seed: int = 0
@@ -227,13 +228,14 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
     }
 
 
-def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, dict]:
+def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, dict, np.ndarray]:
     """The visual hull of the posed masks; its bounds from COLMAP's points while they are the
     best guess, else from the masks' cones. With ``hull_floor``, carved again with the floor the
     copies rest on (floor.py); with ``hull_snap``, moved onto the points (snap.py), and with
     ``hull_photo`` (and the photograph's ``gray``) moved again from the carved hull onto those and
     the points where the copies' pixels agree about the snapped one (photo.py). The second value
-    says what those did ({"floor": ..., "snap": ..., "photo": ...}, None where not done)."""
+    says what those did ({"floor": ..., "snap": ..., "photo": ...}, None where not done); the
+    third is the photo-consistent points (none without hull_photo)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
     carve = functools.partial(
         hull.visual_hull, ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
@@ -250,19 +252,20 @@ def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, 
             "hull_outliers null, a tenth of the copies)",
         ) from None
     report = {"floor": None, "snap": None, "photo": None}
+    agreed = np.zeros((0, 3))
     plane = floor.floor_plane(mesh, poses, IMAGE_UP, points) if settings.hull_floor else None
     if plane is not None:
         mesh, _ = carve(floors=floor.floors_in_object_frame(plane, poses))
         report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}
     if not settings.hull_snap:
-        return mesh, report
+        return mesh, report, agreed
     snapped, how = snap.snap_to_points(mesh, points)
     if settings.hull_photo and how is not None and gray is not None:
         agreed, found = photo.consistent_points(snapped, poses, K, gray, ids)
         report["photo"] = found.as_dict()
         snapped, how = snap.snap_to_points(mesh, np.vstack([points, agreed]))
     report["snap"] = None if how is None else how.as_dict()
-    return snapped, report
+    return snapped, report, agreed
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -295,7 +298,14 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     if settings.subpixel_rounds and registration.reconstruction is not None:
         subpixel = _subpixel_rounds(photo, ids, K, registration, workdir, settings)
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
-    mesh, shaped = _carve(ids, registration.poses, K, registration.points, settings, adjust.gray_image(photo))
+    gray = adjust.gray_image(photo)
+    mesh, shaped, agreed = _carve(ids, registration.poses, K, registration.points, settings, gray)
+    tracked = {}
+    if settings.photo_tracks and len(agreed) and registration.reconstruction is not None:
+        began = time.perf_counter()
+        tracked = _photo_tracks(gray, ids, K, registration, agreed, settings)
+        timings["photo_tracks_s"] = time.perf_counter() - began
+        mesh, shaped, _ = _carve(ids, registration.poses, K, registration.points, settings, gray)
     coverage = refine.coverage(mesh, K, ids, registration.poses)
     doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
     if doubtful:
@@ -321,6 +331,7 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         "mesh": mesh,
         "rounds": rounds,
         "subpixel": subpixel,
+        "photo_tracks": tracked,
         "shape": shaped,
         "coverage": coverage,
         "timings": timings,
@@ -383,6 +394,30 @@ def _subpixel_rounds(photo, ids, K, registration: mapping.Registration, workdir,
     return {"flipped": flipped, "rounds": rounds}
 
 
+def _photo_tracks(gray, ids, K, registration: mapping.Registration, points, settings: Settings) -> dict:
+    """The photo-consistent ``points`` made tracks, every track observed in every copy that sees
+    it, then the sub-pixel rounds and bundle adjustment again (extend.py): the registration's
+    poses and points become the adjusted ones. Returns what it did, for duplicates.json."""
+    reconstruction = registration.reconstruction
+    names = {mapping.image_name(i): i for i in list(registration.poses) + registration.unregistered}
+    added = extend.add_points(reconstruction, points, K, ids, names)
+    candidates, observed = extend.extend_tracks(reconstruction, gray, K, ids, names)
+    single = extend.remove_single(reconstruction)
+    adjust.bundle_adjust(reconstruction, settings.max_error_px)
+    for _ in range(settings.subpixel_rounds):
+        adjust.align_tracks(reconstruction, gray, K)
+        adjust.bundle_adjust(reconstruction, settings.max_error_px)
+    stats = extend.ExtendStats(added, candidates, observed, single)
+    log.info(
+        "photo tracks: %d points added, %d of %d candidate observations kept, %d single tracks removed; "
+        "reprojection error %.3f px", added, observed, candidates, single,
+        reconstruction.compute_mean_reprojection_error(),
+    )  # fmt: skip
+    registration.poses = adjust.poses_by_instance(reconstruction, names)
+    registration.points = np.array([p.xyz for p in reconstruction.points3D.values()]).reshape(-1, 3)
+    return {**stats.as_dict(), "reprojection_error_px": reconstruction.compute_mean_reprojection_error()}
+
+
 def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings):
     """Refine the poses against the masks and pixels with the hull, carve again; keep a round
     while the mean residual falls."""
@@ -395,7 +430,7 @@ def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings)
         if best is not None and residual >= best:
             break
         best, poses, unregistered = residual, result.poses, []
-        mesh, _ = _carve(ids, poses, K, np.zeros((0, 3)), settings)
+        mesh, _, _ = _carve(ids, poses, K, np.zeros((0, 3)), settings)
     return poses, mesh, rounds
 
 
@@ -463,6 +498,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
         "pairs": found["pairs"],
         "refinement": found["rounds"],
         "subpixel": found["subpixel"],
+        "photo_tracks": found["photo_tracks"],
         "hull_shape": found["shape"],
         "hull_coverage": {str(i): float(c) for i, c in sorted(found["coverage"].items())},
         "scale": note,
@@ -486,6 +522,11 @@ def settings_from(values: dict) -> Settings:
         raise SceneError("duplicates --set", "matcher", f"one of {allowed}, got {settings.matcher!r}")
     if settings.hull_photo and not settings.hull_snap:
         raise SceneError("duplicates --set", "hull_photo", "hull_snap true too (the photo's points are snapped onto)")
+    if settings.photo_tracks and not (settings.hull_photo and settings.subpixel_rounds):
+        raise SceneError(
+            "duplicates --set", "photo_tracks", "hull_photo true and subpixel_rounds > 0 too (the photo's points on "
+            "the sub-pixel model)",
+        )  # fmt: skip
     if settings.track_size and settings.matcher != "xfeat":
         raise SceneError(
             "duplicates --set", "track_size", f"0 with the {settings.matcher} matcher (tracks.py is XFeat's)"
