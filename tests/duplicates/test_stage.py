@@ -141,8 +141,8 @@ def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
     monkeypatch.setattr(hull, "visual_hull", lambda *a, **kw: (carved, None))
     directions = np.random.default_rng(0).normal(size=(2000, 3))
     points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    kept, plain = stage._carve(None, {}, None, points, settings())
-    snapped, report = stage._carve(None, {}, None, points, settings(hull_snap=True))
-    assert kept is carved and plain == {"floor": None, "snap": None, "photo": None}
+    kept, plain, none = stage._carve(None, {}, None, points, settings())
+    snapped, report, _ = stage._carve(None, {}, None, points, settings(hull_snap=True))
+    assert kept is carved and plain == {"floor": None, "snap": None, "photo": None} and none.shape == (0, 3)
     radius = np.linalg.norm(snapped.positions, axis=1)
     assert np.abs(radius - 1.0).max() < 0.01 and report["snap"]["points"] == 2000

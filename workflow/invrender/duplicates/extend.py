@@ -53,22 +53,23 @@ class ExtendStats:
 def add_points(reconstruction, points: np.ndarray, K: np.ndarray, ids: np.ndarray, names: dict) -> int:
     """Each point (the model's frame) as a new track with one observation: its projection in the
     nearest copy whose mask owns it (``names``: image name -> instance id). Returns how many."""
-    poses = {i: reconstruction.image(i).cam_from_world().matrix() for i in reconstruction.reg_image_ids()}
-    instance = {i: names[reconstruction.image(i).name] for i in poses}
+    points = np.asarray(points, np.float64).reshape(-1, 3)
     height, width = ids.shape
-    added = 0
-    for X in np.asarray(points, np.float64).reshape(-1, 3):
-        owners = []
-        for image_id, pose in poses.items():
-            cam = pose[:, :3] @ X + pose[:, 3]
-            x, y = cam[:2] / cam[2] * np.diag(K)[:2] + K[:2, 2] if cam[2] > 0 else (-1.0, -1.0)
-            if 0 <= x < width and 0 <= y < height and ids[int(y), int(x)] == instance[image_id]:
-                owners.append((cam[2], image_id, (x, y)))
-        if owners:
-            _, image_id, xy = min(owners)
-            _observe(reconstruction, image_id, np.asarray(xy), None, X)
-            added += 1
-    return added
+    depth, owner, where = np.full(len(points), np.inf), np.full(len(points), -1), np.zeros((len(points), 2))
+    for image_id in reconstruction.reg_image_ids():
+        pose = reconstruction.image(image_id).cam_from_world().matrix()
+        z = points @ pose[2, :3] + pose[2, 3]
+        xy = adjust.project_pixels(pose, K, points) if len(points) else np.zeros((0, 2))
+        inside = (z > 0) & np.all(xy >= 0, axis=1) & (xy[:, 0] < width) & (xy[:, 1] < height)
+        instance = names[reconstruction.image(image_id).name]
+        owned = np.zeros(len(points), bool)
+        owned[inside] = ids[xy[inside, 1].astype(int), xy[inside, 0].astype(int)] == instance
+        nearer = owned & (z < depth)
+        depth[nearer], owner[nearer], where[nearer] = z[nearer], image_id, xy[nearer]
+    kept = owner >= 0
+    for X, image_id, xy in zip(points[kept], owner[kept], where[kept]):
+        _observe(reconstruction, int(image_id), xy, None, X)
+    return int(kept.sum())
 
 
 def _observe(reconstruction, image_id: int, xy: np.ndarray, point_id: int | None, X=None) -> int:
