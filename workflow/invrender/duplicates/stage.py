@@ -408,14 +408,14 @@ def _photo_tracks(gray, ids, K, registration: mapping.Registration, points, sett
         adjust.align_tracks(reconstruction, gray, K)
         adjust.bundle_adjust(reconstruction, settings.max_error_px)
     stats = extend.ExtendStats(added, candidates, observed, single)
+    error = reconstruction.compute_mean_reprojection_error()
     log.info(
         "photo tracks: %d points added, %d of %d candidate observations kept, %d single tracks removed; "
-        "reprojection error %.3f px", added, observed, candidates, single,
-        reconstruction.compute_mean_reprojection_error(),
+        "reprojection error %.3f px", added, observed, candidates, single, error,
     )  # fmt: skip
     registration.poses = adjust.poses_by_instance(reconstruction, names)
     registration.points = np.array([p.xyz for p in reconstruction.points3D.values()]).reshape(-1, 3)
-    return {**stats.as_dict(), "reprojection_error_px": reconstruction.compute_mean_reprojection_error()}
+    return {**stats.as_dict(), "reprojection_error_px": error}
 
 
 def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings):
