@@ -35,6 +35,7 @@ from scipy.ndimage import map_coordinates
 from scipy.spatial import cKDTree
 
 from ..scene.images import linear_to_srgb
+from .refine import project
 
 __all__ = ["AlignStats", "align_tracks", "bundle_adjust", "gray_image", "poses_by_instance", "resolve_flips"]
 
@@ -72,7 +73,8 @@ def sample_bilinear(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return map_coordinates(image, [xy[..., 1] - 0.5, xy[..., 0] - 0.5], order=1, mode="nearest")
 
 
-def _cam_from_world(reconstruction) -> dict[int, np.ndarray]:
+def cam_from_world(reconstruction) -> dict[int, np.ndarray]:
+    """{image id: 3 x 4 cam_from_world} of every registered image."""
     return {i: reconstruction.image(i).cam_from_world().matrix() for i in reconstruction.reg_image_ids()}
 
 
@@ -92,7 +94,7 @@ def reference_surfaces(reconstruction, K: np.ndarray, half: int):
     if len(points) < 4:
         return
     _, near = cKDTree(points).query(points, k=min(NEIGHBOURS, len(points)))
-    poses = _cam_from_world(reconstruction)
+    poses = cam_from_world(reconstruction)
     grid = patch_grid(half)
     K_inv = np.linalg.inv(K)
     for k, point_id in enumerate(ids):
@@ -119,23 +121,18 @@ def facing(pose: np.ndarray, normal: np.ndarray, X0: np.ndarray) -> float:
     return float(-(R @ normal) @ ray / np.linalg.norm(ray))
 
 
-def project_pixels(pose: np.ndarray, K: np.ndarray, points: np.ndarray) -> np.ndarray:
-    cam = points @ pose[:, :3].T + pose[:, 3]
-    return cam[:, :2] / cam[:, 2:] * np.diag(K)[:2] + K[:2, 2]
-
-
 def _patches(reconstruction, K: np.ndarray, half: int):
     """Per observation of every track except its reference: the reference patch's pixels, the
     same surface points projected into the observation's image (centred on its keypoint), and
     the observation's (image_id, point2D_idx)."""
-    poses = _cam_from_world(reconstruction)
+    poses = cam_from_world(reconstruction)
     centre = len(patch_grid(half)) // 2
     refs, targets, handles = [], [], []
     for _, observations, ref, pixels, surface, _ in reference_surfaces(reconstruction, K, half):
         for obs in observations:
             if obs == ref:
                 continue
-            projected = project_pixels(poses[obs[0]], K, surface)
+            projected = project(K, poses[obs[0]], surface)[0]
             keypoint = np.asarray(reconstruction.image(obs[0]).points2D[obs[1]].xy, np.float64)
             refs.append(pixels)
             targets.append(projected - projected[centre] + keypoint)
@@ -145,13 +142,25 @@ def _patches(reconstruction, K: np.ndarray, half: int):
     return np.array(refs), np.array(targets), handles
 
 
+def zero_mean(gray: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each patch's samples at ``at`` (N, P, 2) less their mean, and their norms with 1e-12 added
+    (a plain patch divides nothing by zero)."""
+    values = sample_bilinear(gray, at)
+    values -= values.mean(axis=1, keepdims=True)
+    return values, np.linalg.norm(values, axis=1) + 1e-12
+
+
+def correlation(gray: np.ndarray, at: np.ndarray, reference: np.ndarray, reference_norm: np.ndarray) -> np.ndarray:
+    """Normalised cross-correlation of the patches at ``at`` with a ``zero_mean`` reference."""
+    values = zero_mean(gray, at)[0]
+    return (values * reference).sum(axis=1) / (np.linalg.norm(values, axis=1) * reference_norm + 1e-12)
+
+
 def patch_shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray, iterations: int):
     """Per observation, the shift of its warped patch that best matches the reference patch up
     to gain and offset, and the normalised correlation there."""
     grad_y, grad_x = np.gradient(gray)
-    reference = sample_bilinear(gray, refs)
-    reference -= reference.mean(axis=1, keepdims=True)
-    reference_norm = np.linalg.norm(reference, axis=1) + 1e-12
+    reference, reference_norm = zero_mean(gray, refs)
     shift = np.zeros((len(targets), 2))
     for _ in range(iterations):
         at = targets + shift[:, None]
@@ -163,10 +172,7 @@ def patch_shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray, iterat
         normal = np.einsum("npi,npj->nij", J, J) + 1e-12 * np.eye(2)
         step = -np.linalg.solve(normal, np.einsum("npi,np->ni", J, residual)[..., None])[..., 0]
         shift += np.clip(step, -0.5, 0.5)  # Gauss-Newton, damped: patches are small
-    values = sample_bilinear(gray, targets + shift[:, None])
-    values -= values.mean(axis=1, keepdims=True)
-    ncc = (values * reference).sum(axis=1) / (np.linalg.norm(values, axis=1) * reference_norm + 1e-12)
-    return shift, ncc
+    return shift, correlation(gray, targets + shift[:, None], reference, reference_norm)
 
 
 def align_tracks(reconstruction, gray: np.ndarray, K: np.ndarray, half: int = HALF) -> AlignStats:

@@ -29,6 +29,7 @@ import numpy as np
 import pycolmap
 
 from . import adjust
+from .refine import project
 
 __all__ = ["ExtendStats", "add_points", "extend_tracks", "remove_single"]
 
@@ -54,10 +55,8 @@ def add_points(reconstruction, points: np.ndarray, K: np.ndarray, ids: np.ndarra
     points = np.asarray(points, np.float64).reshape(-1, 3)
     height, width = ids.shape
     depth, owner, where = np.full(len(points), np.inf), np.full(len(points), -1), np.zeros((len(points), 2))
-    for image_id in reconstruction.reg_image_ids():
-        pose = reconstruction.image(image_id).cam_from_world().matrix()
-        z = points @ pose[2, :3] + pose[2, 3]
-        xy = adjust.project_pixels(pose, K, points) if len(points) else np.zeros((0, 2))
+    for image_id, pose in adjust.cam_from_world(reconstruction).items():
+        xy, z = project(K, pose, points)
         inside = (z > 0) & np.all(xy >= 0, axis=1) & (xy[:, 0] < width) & (xy[:, 1] < height)
         instance = names[reconstruction.image(image_id).name]
         owned = np.zeros(len(points), bool)
@@ -88,7 +87,7 @@ def _observe(reconstruction, image_id: int, xy: np.ndarray, point_id: int | None
 def _candidates(reconstruction, K: np.ndarray, ids: np.ndarray, names: dict, half: int):
     """(reference pixels, projected surface, (point id, image id)) for every copy that sees a
     track's plane, owns the window around its projection and has no observation of it."""
-    poses = {i: reconstruction.image(i).cam_from_world().matrix() for i in reconstruction.reg_image_ids()}
+    poses = adjust.cam_from_world(reconstruction)
     instance = {i: names[reconstruction.image(i).name] for i in poses}
     centre, margin = len(adjust.patch_grid(half)) // 2, half + SEARCH_PX + 1
     height, width = ids.shape
@@ -98,7 +97,7 @@ def _candidates(reconstruction, K: np.ndarray, ids: np.ndarray, names: dict, hal
         for image_id, pose in poses.items():
             if image_id in seen or adjust.facing(pose, normal, X0) < MIN_FACING:
                 continue
-            projected = adjust.project_pixels(pose, K, surface)
+            projected = project(K, pose, surface)[0]
             x, y = (int(v) for v in projected[centre])
             if not (margin <= x < width - margin and margin <= y < height - margin):
                 continue
@@ -109,16 +108,12 @@ def _candidates(reconstruction, K: np.ndarray, ids: np.ndarray, names: dict, hal
 
 def _best_shifts(gray: np.ndarray, refs: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """Per candidate, the coarse shift (steps of STEP_PX within SEARCH_PX) of best correlation."""
-    reference = adjust.sample_bilinear(gray, refs)
-    reference -= reference.mean(axis=1, keepdims=True)
-    reference_norm = np.linalg.norm(reference, axis=1) + 1e-12
+    reference, reference_norm = adjust.zero_mean(gray, refs)
     best, shift = np.full(len(targets), -2.0), np.zeros((len(targets), 2))
     steps = np.arange(-SEARCH_PX, SEARCH_PX + 1, STEP_PX)
     for dy in steps:
         for dx in steps:
-            values = adjust.sample_bilinear(gray, targets + np.array([dx, dy], np.float64))
-            values -= values.mean(axis=1, keepdims=True)
-            ncc = (values * reference).sum(axis=1) / (np.linalg.norm(values, axis=1) * reference_norm + 1e-12)
+            ncc = adjust.correlation(gray, targets + np.array([dx, dy], np.float64), reference, reference_norm)
             better = ncc > best
             best[better], shift[better] = ncc[better], (dx, dy)
     return shift
