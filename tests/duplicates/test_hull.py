@@ -400,7 +400,6 @@ def test_the_floor_through_points_of_the_surface_cuts_the_skirts_a_floor_through
     from_hull = floor.floor_plane(plain, poses, [0.0, -1.0, 0.0])
     from_points = floor.floor_plane(plain, poses, [0.0, -1.0, 0.0], points)
     hull_gaps, point_gaps = floor_gaps(mesh, poses, from_hull) / d, floor_gaps(mesh, poses, from_points) / d
-    print("gaps of the diagonal, hull", np.round(hull_gaps, 4), "points", np.round(point_gaps, 4))
     assert np.degrees(np.arccos(min(float(from_points[0] @ up), 1.0))) < 1.0, from_points[0]
     assert point_gaps.min() > 0.0, "the floor through the points cuts a true box"
     assert np.median(point_gaps) < 0.5 * np.median(hull_gaps)
