@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -43,9 +44,13 @@ def assemble_source(entry: str, kernel_dir: Path = KERNEL_DIR) -> str:
     return expand(entry)
 
 
+def cache_root() -> Path:
+    """Where invrender keeps what it can make again: kernel binaries, device verdicts."""
+    return Path(os.environ.get("INVRENDER_CACHE") or Path.home() / ".cache" / "invrender")
+
+
 def cache_dir() -> Path:
-    root = os.environ.get("INVRENDER_CACHE") or Path.home() / ".cache" / "invrender"
-    return Path(root) / "kernels"
+    return cache_root() / "kernels"
 
 
 def _cache_key(source: str, options: tuple[str, ...], device: cl.Device) -> str:
@@ -59,6 +64,15 @@ def build_program(context: cl.Context, entry: str, options: tuple[str, ...] = ()
     return _build_cached(context, entry, tuple(options))
 
 
+def build(program: cl.Program, options: tuple[str, ...]) -> cl.Program:
+    """program.build(options), without pyopencl's warning for a successful build that logged
+    something: Intel's runtime logs its vectoriser's remarks for every kernel. A failed build
+    still raises, with the log."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        return program.build(options=list(options))
+
+
 @lru_cache(maxsize=64)
 def _build_cached(context: cl.Context, entry: str, options: tuple[str, ...]) -> cl.Program:
     device = context.devices[0]
@@ -66,10 +80,10 @@ def _build_cached(context: cl.Context, entry: str, options: tuple[str, ...]) -> 
     path = cache_dir() / f"{_cache_key(source, options, device)}.bin"
     if path.exists():
         try:
-            return cl.Program(context, [device], [path.read_bytes()]).build(options=list(options))
+            return build(cl.Program(context, [device], [path.read_bytes()]), options)
         except cl.Error:
             path.unlink(missing_ok=True)  # stale or corrupt binary: rebuild below
-    program = cl.Program(context, source).build(options=list(options))
+    program = build(cl.Program(context, source), options)
     binary = program.get_info(cl.program_info.BINARIES)[0]
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_suffix(f".tmp{os.getpid()}")
