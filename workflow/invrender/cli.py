@@ -502,6 +502,12 @@ def cmd_summary(args):
     summary.run(args.results, args.out)
 
 
+def cmd_devices(args):
+    from .bench import devices
+
+    devices.run(args.device, measure=not args.no_throughput)
+
+
 def cmd_bench(args):
     from .bench import run_benchmark
 
@@ -934,6 +940,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="directory to write (runtime.html, runtime.png, metrics.html)")
     p.set_defaults(func=cmd_summary)
 
+    p = stages.add_parser(
+        "devices", help="every OpenCL device: does it build the kernels, how fast, which one a run uses and why"
+    )
+    p.add_argument("--device", help="what the config's `device:` would be (default: the automatic choice)")
+    p.add_argument("--no-throughput", action="store_true", help="skip the short render on each device")
+    p.set_defaults(func=cmd_devices)
+
     from .bench import BENCHMARKS
 
     p = stages.add_parser("bench", help="benchmarks (docs/benchmarks.md): against Mitsuba 3, MILO recovery")
@@ -1042,6 +1055,13 @@ def _bug_log(args, handlers: list) -> str:
 FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
 
+def _is_device_error(error: Exception) -> bool:
+    """No OpenCL device that can run the kernels is the machine's set-up, not a bug (exit 2). The
+    class is looked up where it was raised, so verbs that trace no rays import no OpenCL."""
+    device = sys.modules.get("invrender.render.device")
+    return device is not None and isinstance(error, device.DeviceError)
+
+
 def main(argv=None) -> int:
     """Run one stage. Exit status: 0 done; 2 bad input or an output that cannot be written (one
     line naming the file); 1 a bug (one line naming the log, the traceback in it); 130/143
@@ -1082,6 +1102,9 @@ def main(argv=None) -> int:
         log.error("%s", stop.code)
         return 2
     except Exception as error:  # a bug: the user sees one line, the log has the traceback
+        if _is_device_error(error):
+            log.error("%s", error)
+            return 2
         where = _bug_log(args, handlers)
         first = (str(error).splitlines() or [""])[0]  # one line: the rest is in the traceback
         log.error(
