@@ -43,6 +43,29 @@ def test_the_truth_on_another_mesh_and_atlas_scores_near_zero(truth_and_copy):
     assert perturbed["map_mse"]["ks"] == same["map_mse"]["ks"]
 
 
+def test_the_constant_guess_is_the_truths_surface_mean_scored_the_same_way(truth_and_copy):
+    """Each map set to the truth's mean over the covered texels scores exactly what the report
+    calls the constant guess; kd's MSE is then the truth's variance on the surface."""
+    truth, copy, texels, corr = truth_and_copy
+    guess = map_errors(copy.maps, truth.maps, corr)["constant_guess"]
+    true = {name: corr.truth_values(getattr(truth.maps, name)) for name in ATLAS_MAPS}
+    constant = {name: np.zeros_like(getattr(copy.maps, name)) for name in ATLAS_MAPS}
+    for name in ATLAS_MAPS:
+        constant[name][corr.mask] = true[name].mean(axis=0)
+    sky = np.average(
+        truth.maps.kg.reshape(-1, 3),
+        axis=0,
+        weights=np.broadcast_to(cube_texel_solid_angles(truth.maps.kg.shape[1]), truth.maps.kg.shape[:3]).reshape(-1),
+    )
+    scored = map_errors(
+        with_maps(copy.maps, **constant, kg=np.broadcast_to(sky, truth.maps.kg.shape)), truth.maps, corr
+    )
+    assert scored["material_mse"] == pytest.approx(guess["material_mse"], rel=1e-4)  # float32 maps
+    assert scored["light_maps_mse"] == pytest.approx(guess["light_maps_mse"], rel=1e-4)
+    assert guess["map_mse"]["kd"] == pytest.approx(true["kd"].var(axis=0).mean(), rel=1e-4)
+    assert guess["material_mse"] > 10 * map_errors(copy.maps, truth.maps, corr)["material_mse"] + 1e-4
+
+
 def test_a_light_perturbation_moves_the_light_maps_mse_by_its_mean(truth_and_copy):
     truth, copy, texels, corr = truth_and_copy
     kw = copy.maps.kw + 0.3  # kw MSE 0.09: the light maps MSE (mean of ke, kw, kg) rises by 0.03

@@ -61,19 +61,51 @@ def ball_subset(count: int, limit: int | None) -> np.ndarray:
     return np.linspace(0, count - 1, int(limit)).round().astype(np.int64)
 
 
-def map_errors(recovered_maps, truth_maps, corr: Correspondence, max_ball_texels: int | None = DEFAULT_BALL_TEXELS):
-    """The metrics of the module docstring, as a JSON-ready dict."""
+def map_errors(
+    recovered_maps,
+    truth_maps,
+    corr: Correspondence,
+    max_ball_texels: int | None = DEFAULT_BALL_TEXELS,
+    constant_guess: bool = True,
+):
+    """The metrics of the module docstring, as a JSON-ready dict, and beside them (unless not
+    ``constant_guess``) the same metrics of the best constant guess: each map the truth's mean
+    over the surface (kg over the sphere), which a recovery has to beat by a wide margin."""
     mask = corr.mask
     rec = {name: np.asarray(getattr(recovered_maps, name))[mask] for name in ATLAS_MAPS}
     true = {name: corr.truth_values(getattr(truth_maps, name)) for name in ATLAS_MAPS}
+    subset = ball_subset(len(rec["kd"]), max_ball_texels)
+    errors = _errors(rec, recovered_maps.kg, true, truth_maps.kg, subset)
+    errors["shading_balls"] = {
+        "texels": int(len(subset)),
+        "of_texels": int(len(rec["kd"])),
+        "size_px": BALL_SIZE,
+        "lights": [{"direction": list(d), "irradiance": e} for d, e in BALL_LIGHTS],
+        "clip": [0.0, 1.0],
+    }
+    if not constant_guess:
+        return errors
+    constant = {name: np.broadcast_to(values.mean(axis=0), values.shape) for name, values in true.items()}
+    guess = _errors(constant, _constant_sky(truth_maps.kg), true, truth_maps.kg, subset)
+    return errors | {"constant_guess": {key: guess[key] for key in ("light_maps_mse", "material_mse", "map_mse")}}
+
+
+def _constant_sky(kg) -> np.ndarray:
+    """The sky's mean radiance over the sphere of directions, in every texel."""
+    cube = as_cube(kg)
+    weights = np.broadcast_to(cube_texel_solid_angles(cube.shape[1]), cube.shape[:3])
+    mean = np.average(cube.reshape(-1, cube.shape[-1]), axis=0, weights=weights.reshape(-1))
+    return np.broadcast_to(mean, cube.shape).astype(np.float32)
+
+
+def _errors(rec: dict, rec_kg, true: dict, true_kg, subset: np.ndarray) -> dict:
     per_map = {name: mse(rec[name], true[name]) for name in ATLAS_MAPS}
-    per_map["kg"] = kg_mse(recovered_maps.kg, truth_maps.kg)
+    per_map["kg"] = kg_mse(rec_kg, true_kg)
     compressed = {
         "ke": mse(compress(rec["ke"]), compress(true["ke"])),
         "kw": per_map["kw"],  # already on [0, 1]
-        "kg": kg_mse(compress(recovered_maps.kg), compress(truth_maps.kg)),
+        "kg": kg_mse(compress(rec_kg), compress(true_kg)),
     }
-    subset = ball_subset(len(rec["kd"]), max_ball_texels)
     balls = ball_errors(
         tuple(rec[name][subset] for name in MATERIAL_MAPS), tuple(true[name][subset] for name in MATERIAL_MAPS)
     )
@@ -83,13 +115,6 @@ def map_errors(recovered_maps, truth_maps, corr: Correspondence, max_ball_texels
         "light_map_mse_compressed": compressed,
         "material_mse": float(balls.mean()),
         "map_mse": per_map,
-        "shading_balls": {
-            "texels": int(len(subset)),
-            "of_texels": int(len(rec["kd"])),
-            "size_px": BALL_SIZE,
-            "lights": [{"direction": list(d), "irradiance": e} for d, e in BALL_LIGHTS],
-            "clip": [0.0, 1.0],
-        },
     }
 
 

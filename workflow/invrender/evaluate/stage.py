@@ -120,10 +120,13 @@ def run(
     maps["correspondence"] = corr.summary()
     timings["maps"] = time.perf_counter() - t0
     log.info(
-        "maps: light maps MSE %.4g (paper %.3g), material MSE %.4g (paper %.3g)",
+        "maps: light maps MSE %.4g (a constant guess %.4g, paper %.3g), material MSE %.4g (a constant guess %.4g, "
+        "paper %.3g)",
         maps["light_maps_mse"],
+        maps["constant_guess"]["light_maps_mse"],
         PAPER["light_maps_mse"],
         maps["material_mse"],
+        maps["constant_guess"]["material_mse"],
         PAPER["material_mse"],
     )
 
@@ -369,7 +372,7 @@ def _training_table(snapshots, recovered, truth, corr, held_out, images_dir, spp
     table = []
     for path in tqdm(snapshots, desc="snapshots", unit="snapshot", disable=not progress, leave=False):
         maps, iteration, wall_time = load_snapshot(path, recovered.maps.atlas_shape)
-        errors = map_errors(maps, truth.maps, corr, ball_texels)
+        errors = map_errors(maps, truth.maps, corr, ball_texels, constant_guess=False)
         row = {
             "snapshot": path.name,
             "iteration": iteration,
