@@ -520,7 +520,7 @@ def _place(obj_positions, shape: ConvexShape, camera, cfg, rng):
 
 def make_duplicates(config: dict | None = None) -> tuple[Scene, dict]:
     """Build the duplicates scene and its JSON-serialisable metadata (with ``poses`` in the
-    DESIGN.md poses.json form). ``config`` overrides ``DUPLICATES_DEFAULTS`` (or the preset it
+    poses.json form of scene/poses.py). ``config`` overrides ``DUPLICATES_DEFAULTS`` (or the preset it
     names) key by key."""
     cfg = resolve_config(config)
     _check_placement(cfg)  # before the atlas is baked
