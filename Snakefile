@@ -2,7 +2,8 @@
 
 One rule per stage (workflow/rules/<stage>.smk), each calling one `invrender <stage>` command;
 artifacts land in results/{scene}/ (docs/architecture.md, "The stage contract"). The default
-config is the embedded demo: `snakemake --cores 2` builds two small synthetic scenes end to end.
+config is the embedded demo: `snakemake --cores 2` builds three small synthetic scenes (room,
+boxes, living), one per mode, end to end.
 """
 
 
