@@ -22,7 +22,8 @@
   recovered poses, beside the paper's Tables 1 and 2 (``duplicates_material.py``; docs/benchmarks.md).
 
 - ``room``: the room mode (PSDR-Room) on the three synthetic layouts through the room stages,
-  one table per item of issue 16's Accept list (``room.py``; docs/benchmarks.md, "Room").
+  a table per result: box, objects, masks, photo, light and material, time (``room.py``;
+  docs/benchmarks.md, "Room").
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper

@@ -1,4 +1,4 @@
-"""A duplicates scene (issue 13) against its truth: masks, poses and the shared mesh.
+"""A duplicates scene against its truth: masks, poses and the shared mesh.
 
 The recovered poses live in the capture camera's world (the truth's world for a synthetic
 capture), but the recovered object frame and the scale are arbitrary: the shared mesh is carved in

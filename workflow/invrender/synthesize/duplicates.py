@@ -116,8 +116,9 @@ FLOOR, OBJECT = 0, 1  # part labels of the template: the floor, then the object'
 
 
 def _preset(kind: str, count: int, hd: bool) -> dict:
-    """A fixture of issue 13: ``count`` copies of ``kind``, upright, upside down and lying in
-    turn, turned about the floor normal, some touching, under a camera 60 degrees above the floor.
+    """A benchmark fixture (docs/duplicates-fixtures.md): ``count`` copies of ``kind``, upright,
+    upside down and lying in turn, turned about the floor normal, some touching, under a camera
+    60 degrees above the floor.
     The CI (320 x 240) and HD (1600 x 1200) versions are the same scene: every pixel length
     (margin included) scales by 5, so the placement draws the same poses."""
     scale = 5 if hd else 1
