@@ -963,6 +963,10 @@ def build_parser() -> argparse.ArgumentParser:
         "box-10-hd); bench duplicates-material: the one whose poses are 'recovered' (default: default)",
     )
     dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
+    summary = p.add_argument_group("bench summary")
+    summary.add_argument(
+        "--readme", help="the README whose results table to rewrite from --out's JSON files (default README.md)"
+    )
     render = p.add_argument_group("bench render")
     render.add_argument(
         "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"

@@ -24,6 +24,9 @@
 - ``room``: the room mode (PSDR-Room) on the three synthetic layouts through the room stages,
   a table per result: box, objects, masks, photo, light and material, time (``room.py``;
   docs/benchmarks.md, "Room").
+- ``summary``: not a measurement: the README's table of headline results, rewritten from the JSON
+  files the benchmarks above left under ``--out`` (``summary.py``; tests/bench/test_bench_summary.py
+  keeps the two equal).
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
@@ -46,6 +49,7 @@ BENCHMARKS = (
     "duplicates-material",
     "accuracy",
     "room",
+    "summary",
 )
 OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
@@ -54,6 +58,7 @@ OPTIONS = {
     "duplicates-material": ("scenes", "poses", "variants", "work"),
     "accuracy": ("work",),
     "room": ("scenes", "work"),
+    "summary": ("readme",),
 }  # what only some take
 
 
