@@ -1,8 +1,9 @@
 """invrender: captures of real spaces in, editable and relightable scenes out.
 
 One rule per stage (workflow/rules/<stage>.smk), each calling one `invrender <stage>` command;
-artifacts land in results/{scene}/ (DESIGN.md, "Artifacts"). The default config is the
-embedded demo: `snakemake --cores 2` builds two small synthetic scenes end to end.
+artifacts land in results/{scene}/ (docs/architecture.md, "The stage contract"). The default
+config is the embedded demo: `snakemake --cores 2` builds three small synthetic scenes (room,
+boxes, living), one per mode, end to end.
 """
 
 

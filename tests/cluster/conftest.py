@@ -6,7 +6,7 @@ when the session ends, also when a test (or the start itself) fails.
 It needs root (slurmd runs jobs as their user; MariaDB and munged are started as root here) and
 Debian's packages slurm-wlm, slurmdbd, mariadb-server and munge: the README's setup installs
 them, and the fixture installs what is missing with apt-get. Where it cannot (not root, no
-apt-get), the test fails under CI=true and is skipped with that reason elsewhere (README).
+apt-get), the test fails under CI=true and is skipped with that reason elsewhere (docs/cluster.md, "The test").
 """
 
 from __future__ import annotations

@@ -199,7 +199,7 @@ def _stop_after_cancel(cluster, run: subprocess.Popen, job_id: str, grace=10) ->
     2.8.0 knows the state CANCELLED, but sacct reports a job a user cancelled as "CANCELLED by
     <uid>" (SLURM 22.05 and later), which the plugin takes for a job still running: it waits for
     ever. So, as a user would, press Ctrl-C once sacct has the job cancelled and a status check
-    or two have passed (README, "Running on a cluster")."""
+    or two have passed (docs/cluster.md, "Step by step")."""
     deadline = None
     while run.poll() is None:
         state = cluster.run("sacct", "-X", "-n", "-P", "-j", job_id, "-o", "State").strip()

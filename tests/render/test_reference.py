@@ -181,7 +181,7 @@ def test_fresnel_clamp():
 
 
 def test_albedo_without_the_clamp_reproduces_the_design_numbers():
-    # DESIGN.md / docs/renderer.md: kd = 1, ks = 0, ka = 0.1, F90 = 1: 1.00 at normal incidence,
+    # docs/renderer.md, "Material model": kd = 1, ks = 0, ka = 0.1, F90 = 1: 1.00 at normal incidence,
     # about 1.28 at 85 degrees
     a = bsdf.directional_albedo(np.radians([0.0, 85.0]), 1.0, 0.0, 0.1, f90_clamp=False)[:, 0]
     assert a[0] == pytest.approx(1.0, abs=1e-4)

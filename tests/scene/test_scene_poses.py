@@ -1,4 +1,4 @@
-"""scene/poses.py: poses.json read, written and checked (DESIGN.md form)."""
+"""scene/poses.py: poses.json read, written and checked (the form its docstring gives)."""
 
 import json
 import re

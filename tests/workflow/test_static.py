@@ -81,7 +81,7 @@ def test_every_rule_is_known():
 
 
 def test_rulegraph_picture_is_current(tmp_path):
-    """docs/rulegraph.svg shows every rule (regenerate it as README.md says when rules change)."""
+    """docs/rulegraph.svg shows every rule (regenerate it as docs/workflow.md says when rules change)."""
     result = snakemake(tmp_path, "--rulegraph", config=DEMO_CONFIG)
     rules = set(re.findall(r'label = "([a-z_]+)"', result.stdout))
     svg = (REPO / "docs" / "rulegraph.svg").read_text()

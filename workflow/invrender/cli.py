@@ -880,7 +880,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device")
     p.set_defaults(func=cmd_evaluate)
 
-    p = stages.add_parser("accuracy", help="accuracy against time for every knob, the knee, the floors (issue 15)")
+    p = stages.add_parser("accuracy", help="accuracy against time for every knob, the knee, the floors")
     p.add_argument("--scene", required=True, help="the scene directory the workflow renders")
     p.add_argument("--features", required=True, help="its features.json (the configured default)")
     p.add_argument("--out", required=True, help="directory to write (accuracy_vs_time.csv, accuracy.json, plots)")
@@ -916,7 +916,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_assets)
 
     p = stages.add_parser(
-        "accuracy-run", help="one recovery configuration trained, baked and scored (rule recovery_run, issue 15)"
+        "accuracy-run", help="one recovery configuration trained, baked and scored (rule recovery_run)"
     )
     p.add_argument("--source", required=True, help="the recovery stage: milo or duplicates_material")
     p.add_argument("--out", required=True, help="directory to write (run.json, train/, scene/, score/)")
@@ -976,6 +976,10 @@ def build_parser() -> argparse.ArgumentParser:
         "box-10-hd); bench duplicates-material: the one whose poses are 'recovered' (default: default)",
     )
     dup.add_argument("--poses", help="bench duplicates-material: truth, recovered (default both; --quick truth)")
+    summary = p.add_argument_group("bench summary")
+    summary.add_argument(
+        "--readme", help="the README whose results table to rewrite from --out's JSON files (default README.md)"
+    )
     render = p.add_argument_group("bench render")
     render.add_argument(
         "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"

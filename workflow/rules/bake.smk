@@ -71,7 +71,7 @@ rule bake_duplicates:
 
 
 rule bake_room:
-    """A room scene directory (mode room, issue 16): the room box as inward-facing walls, floor
+    """A room scene directory (mode room): the room box as inward-facing walls, floor
     and ceiling, the room_lights stage's lights as one-sided emitters, and, where those stages
     exist, the room_objects stage's placed assets and the room_materials stage's materials,
     seen by the photo's camera (workflow/invrender/bake/room.py)."""

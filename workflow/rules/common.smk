@@ -607,8 +607,10 @@ _check_device()
 
 
 def recovers(scene):
-    """The modes whose stages have landed: multiview (milo_train, bake) and duplicates (segment,
-    duplicates, geometry, bake_duplicates). A room scene waits for issue 16."""
+    """The modes recovered from cameras: multiview (milo_train, bake) and duplicates (segment,
+    duplicates, geometry, bake_duplicates), which also get `accuracy` and `summary`. A room
+    scene's stages (room_box to bake_room) hang on its depth and segmentation instead
+    (has_room_inputs)."""
     return mode(scene) in ("multiview", "duplicates")
 
 

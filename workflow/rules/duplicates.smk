@@ -1,4 +1,4 @@
-# Structure from Duplicates (issue 13): per instance, a crop and its features at every rotation
+# Structure from Duplicates, its poses and shape: per instance, a crop and its features at every rotation
 # angle (fanned out from the segment checkpoint's instances.json); then all pairs matched, COLMAP's
 # virtual cameras, the visual hull and render-and-compare refinement in one job.
 

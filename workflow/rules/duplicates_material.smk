@@ -1,4 +1,4 @@
-# Structure from Duplicates (issue 14): the copies' one shared material, their support's and the
+# Structure from Duplicates, its appearance: the copies' one shared material, their support's and the
 # sky, from the photograph through the adjoint path tracer; bake_duplicates then writes the scene.
 
 

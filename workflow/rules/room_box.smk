@@ -1,8 +1,8 @@
-"""The room box (issue 16, mode `room`, PSDR-Room section 4.2): the room as a box from one
+"""The room box (mode `room`, PSDR-Room section 4.2): the room as a box from one
 photograph's depth, wall/floor/ceiling segmentation and field of view, as
 results/{scene}/room_box/ (room.json: the box, the camera, the floor, the coarse box, the
-losses and the metrics; room_box.png), built by `all` for every room scene (the object, light
-and material stages that follow it are issue 16's). Its input functions are in common.smk,
+losses and the metrics; room_box.png), built by `all` for every room scene (the light, object
+and material stages start from it). Its input functions are in common.smk,
 "room".
 """
 

@@ -1,4 +1,4 @@
-"""The room's initial lights (issue 16, mode `room`, PSDR-Room section 4.4 "Light
+"""The room's initial lights (mode `room`, PSDR-Room section 4.4 "Light
 initialization"): the ceiling grid scaled 0.8 less the cells in the camera's frustum or behind
 it, a light behind the camera, one per invisible wall, the visible windows, the lamps marked, and
 their radiance from one unit-radiance render, as results/{scene}/room_lights/ (lights.json,

@@ -1,4 +1,4 @@
-"""The room's materials and lights (issue 16 item 6, mode `room`, PSDR-Room section 4.4): crop
+"""The room's materials and lights (mode `room`, PSDR-Room section 4.4): crop
 pairs, homogeneous albedos from shading-corrected median colours, procedural retrieval with the
 transform search, then Eq. 4's joint optimisation of materials (through the adjoint) and light
 radiances (exact per-light NNLS), as results/{scene}/room_materials/ (materials.json, lights.json,

@@ -1,4 +1,4 @@
-"""The room's objects (issue 16 item 4, mode `room`, PSDR-Room section 4.3): each object and lamp
+"""The room's objects (mode `room`, PSDR-Room section 4.3): each object and lamp
 segment of the photograph retrieved from the asset library, placed from its depth points on its
 support (the floor or another object), then all refined jointly by the differentiable mask IoU
 and depth L1 of Eq. 3, as results/{scene}/room_objects/ (objects.json, room_objects.png). Its

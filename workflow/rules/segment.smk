@@ -1,4 +1,4 @@
-"""The segment checkpoint (issue 13, duplicates scenes): the copies of the object in the
+"""The segment checkpoint (duplicates scenes): the copies of the object in the
 photograph, as results/{scene}/segmentation/ (masks/<image stem>.png, instances.json,
 overlay.png). A checkpoint: how many instances there are, and so the per-instance jobs
 downstream, is known only once it has run (segmented_instances below).

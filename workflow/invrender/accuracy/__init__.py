@@ -1,4 +1,4 @@
-"""The `accuracy` stage (issue 15): what accuracy costs in time, measured on the scene itself.
+"""The `accuracy` stage: what accuracy costs in time, measured on the scene itself.
 
 Each knob is swept against a converged reference of the same scene, error and time in one run:
 forward rendering (``forward.py``: spp, bounces, each effect `features` switches, NEE against

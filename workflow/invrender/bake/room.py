@@ -1,4 +1,4 @@
-"""A room scene directory (mode `room`, issue 16 item 7): the room stages' outputs assembled by
+"""A room scene directory (mode `room`): the room stages' outputs assembled by
 scene/room_scene.assemble_room and written as a version-2 scene seen by the photo's camera.
 
     room_box/room.json              the box and the photo's camera (required)

@@ -22,7 +22,11 @@
   recovered poses, beside the paper's Tables 1 and 2 (``duplicates_material.py``; docs/benchmarks.md).
 
 - ``room``: the room mode (PSDR-Room) on the three synthetic layouts through the room stages,
-  one table per item of issue 16's Accept list (``room.py``; docs/benchmarks.md, "Room").
+  a table per result: box, objects, masks, photo, light and material, time (``room.py``;
+  docs/benchmarks.md, "Room").
+- ``summary``: not a measurement: the README's table of headline results, rewritten from the JSON
+  files the benchmarks above left under ``--out`` (``summary.py``; tests/bench/test_bench_summary.py
+  keeps the two equal).
 
 ``harness.py`` is what they share (clocks, seeds, memory, the Mitsuba variant, the report).
 Submodules are imported when run, so ``python -m invrender.bench.render`` (the helper
@@ -45,6 +49,7 @@ BENCHMARKS = (
     "duplicates-material",
     "accuracy",
     "room",
+    "summary",
 )
 OPTIONS = {
     "milo": ("config", "iterations", "ablation", "work"),
@@ -53,6 +58,7 @@ OPTIONS = {
     "duplicates-material": ("scenes", "poses", "variants", "work"),
     "accuracy": ("work",),
     "room": ("scenes", "work"),
+    "summary": ("readme",),
 }  # what only some take
 
 

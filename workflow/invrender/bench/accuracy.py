@@ -1,5 +1,5 @@
 """`invrender bench accuracy`: the accuracy stage's `full` sweep (`--quick`: its `quick` one)
-on the demo's two scenes, through the workflow itself.
+on the demo's room and boxes (the scenes the accuracy rule takes), through the workflow itself.
 
 Runs `snakemake` on the demo config (config/config.yaml) in ``WORK`` (default
 results/bench/accuracy), with `accuracy.budget` set, for each scene's `accuracy` target: the

@@ -1,4 +1,4 @@
-"""`invrender bench duplicates`: Structure from Duplicates (issue 13) on the synthetic fixtures,
+"""`invrender bench duplicates`: Structure from Duplicates' poses and shape on the synthetic fixtures,
 beside the paper's Table 2 (docs/benchmarks.md, "Structure from Duplicates: poses and shape").
 
 Per scene (a preset of invrender.synthesize.duplicates, docs/duplicates-fixtures.md) and variant

@@ -1,4 +1,4 @@
-"""`invrender bench duplicates-material`: Structure from Duplicates' appearance half (issue 14) on
+"""`invrender bench duplicates-material`: Structure from Duplicates' appearance half on
 the synthetic fixtures, beside the paper's Table 1 (single view) and Table 2 (albedo against the
 number of copies) (docs/benchmarks.md, "Structure from Duplicates: material and light").
 

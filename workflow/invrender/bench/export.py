@@ -1,4 +1,5 @@
-"""`invrender bench export`: what the USD export loses, measured on the two demo scenes.
+"""`invrender bench export`: what the USD export loses, measured on the demo's room and the
+duplicates generator's default scene (six cans).
 
 Three tables (docs/export.md quotes them), printed and written under ``--out`` (``export.json``,
 one CSV per table, ``export_table.md``):

@@ -1,7 +1,7 @@
-"""`invrender bench room`: the room mode (PSDR-Room, issue 16) on the three synthetic layouts of
+"""`invrender bench room`: the room mode (PSDR-Room) on the three synthetic layouts of
 `invrender synthesize room_photo` (living, bedroom, office) at 1024 x 768, through the room
-stages this tree has, one table per item of issue 16's Accept list (docs/benchmarks/room.md;
-docs/benchmarks.md, "Room").
+stages this tree has, a table per result: box, objects, masks, photo, light and material, time
+(docs/benchmarks/room.md; docs/benchmarks.md, "Room").
 
 Per layout, each step a stage's Python entry point timed with its peak memory (harness.Ledger,
 steps.json in WORK/LAYOUT):
@@ -45,7 +45,7 @@ WIDTH, HEIGHT = 1024, 768
 QUICK_WIDTH, QUICK_HEIGHT = 256, 192
 CAPTURE_SPP, QUICK_CAPTURE_SPP = 16, 4
 EVALUATE_SPP, QUICK_EVALUATE_SPP = 16, 2
-OPTIONAL_STAGES = ("room_objects", "room_materials")  # issue 16's stages written beside this one
+OPTIONAL_STAGES = ("room_objects", "room_materials")  # the room stages that may be absent from a tree
 ROWS = ("stages", "truth objects")
 
 

@@ -1,4 +1,4 @@
-"""Pose refinement by render-and-compare (issue 13 item 6; beyond SfD, which keeps COLMAP's poses).
+"""Pose refinement by render-and-compare (beyond SfD, which keeps COLMAP's poses).
 
 Every instance is the same mesh at its own 6-DoF pose T_cam_from_obj. Each pose is refined against
 what the photo shows of that instance:

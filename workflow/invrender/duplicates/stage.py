@@ -12,7 +12,7 @@ Two steps, so that the per-instance work fans out from the segment checkpoint:
 
       sparse/            COLMAP's model of the virtual cameras (one camera: the real one), in the
                          object frame of poses.json
-      poses.json         T_obj2world per instance (DESIGN.md), after refinement if `refine`; `registered`
+      poses.json         T_obj2world per instance (scene/poses.py), after refinement if `refine`; `registered`
                          false for an instance nothing could place
       poses_colmap.json  the same from COLMAP alone (before refinement)
       object.ply         the shared mesh in the object frame (the geometry stage unwraps it)

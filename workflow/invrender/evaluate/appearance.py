@@ -1,5 +1,5 @@
-"""The shared material and the light of a duplicates scene against the truth (issue 14, item 5;
-SfD section 4: Table 1's single-view column, Table 2's appearance columns).
+"""The shared material and the light of a duplicates scene against the truth (SfD section
+4: Table 1's single-view column, Table 2's appearance columns).
 
 SfD's text says only "PSNR to evaluate albedo, and MSE to quantify roughness and environmental
 lighting"; its released code (github.com/Tianhang-Cheng/SfD, utils/evaluate.py and
@@ -33,7 +33,7 @@ trainer/train_material.py) says how, and this follows it where our scenes allow:
 Where SfD renders the albedo from test views and compares pixels, here it is compared on the
 surface, as the MILO evaluation does (``correspond.py``): every covered texel of the recovered
 object's atlas is a 3D point of the recovered mesh in the recovered object frame, taken to the
-true object frame by issue 13's alignment p = s Q p' + o (``duplicates.mesh_metrics``), and looked
+true object frame by the mesh alignment p = s Q p' + o (``duplicates.mesh_metrics``), and looked
 up on the true object's surface (the true texel at the nearest point). So texels count by area,
 faces the photograph never shows included. The support (a recovered object with the material set
 "support", in the recovered world) is compared the same way with the true floor, through the
@@ -139,7 +139,7 @@ class Similarity:
 
 @dataclass
 class Alignment:
-    """Issue 13's alignment: the recovered object frame in the true one (p = s Q p' + o) and the
+    """The mesh alignment: the recovered object frame in the true one (p = s Q p' + o) and the
     recovered world in the true one (the similarity of the copies' centres)."""
 
     object: Similarity
@@ -405,7 +405,7 @@ def _in_place(side: Side, sky) -> Scene:
 
 def _relighting(out: Path, recovered: Side, truth: Side, alignment, spp, seed, device) -> dict:
     """Both scenes under each new sky, in place and rearranged (``relight.py``); figures."""
-    new_poses, arrangement = None, {"reason": "no alignment of the recovered object frame (issue 13)"}
+    new_poses, arrangement = None, {"reason": "no alignment of the recovered object frame"}
     if alignment is not None:
         centroid = surface_centroid(truth.object_mesh)
         new_poses, arrangement = relight.rearranged_poses(truth.object_mesh, truth.poses, centroid, truth.camera, seed)
@@ -464,7 +464,7 @@ def evaluate(
     training: dict | None = None,
 ) -> dict:
     """metrics.json's "appearance" section (the module docstring and ``relight.py``), figures in
-    ``out_dir``. ``chamfer``: issue 13's mesh metrics (``duplicates.mesh_metrics``) for the table;
+    ``out_dir``. ``chamfer``: the pose and shape evaluation's mesh metrics (``duplicates.mesh_metrics``) for the table;
     ``training``: the material stage's time and memory (``read_training``)."""
     out = Path(out_dir)
     check_sides(recovered, truth)

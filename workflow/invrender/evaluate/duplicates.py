@@ -1,4 +1,4 @@
-"""A duplicates scene (issue 13) against its truth: masks, poses and the shared mesh.
+"""A duplicates scene against its truth: masks, poses and the shared mesh.
 
 The recovered poses live in the capture camera's world (the truth's world for a synthetic
 capture), but the recovered object frame and the scale are arbitrary: the shared mesh is carved in
@@ -595,7 +595,7 @@ def read_instances(path) -> dict:
 def poses_by_id(doc, where) -> tuple[dict[int, np.ndarray], int]:
     """({mask value: T_obj2world} of the registered instances, how many instances are listed).
     An instance is known by the value its pixels have in the id image: ``mask_value``, else its
-    ``instance_id`` (DESIGN.md's poses.json)."""
+    ``instance_id`` (poses.json, the form scene/poses.py documents)."""
     from ..scene.poses import validate_poses
 
     validate_poses(doc, where)

@@ -13,7 +13,7 @@ the true scene under new light, and with the copies rearranged, seen from the ph
   centroid, so no two copies can touch; only points where the whole bounding sphere projects
   inside the image (with a margin) are used, so every copy stays in view. The true scene gets the
   new poses T'_i; the recovered scene gets its own mesh at T'_i A (A: the recovered object frame
-  in the true one, issue 13's alignment), in the true world: a user's edit of the recovered
+  in the true one, the mesh alignment of duplicates.mesh_metrics), in the true world: a user's edit of the recovered
   scene, "put the object there", so the copies' pose errors in the photograph do not carry over
   and what is scored is the recovered shape, material and support.
 - In place: both scenes as they are (the recovered one at its recovered poses, from its own

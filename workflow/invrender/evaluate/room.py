@@ -1,4 +1,4 @@
-"""A room scene (mode `room`, issue 16) against the synthetic truth of its photo.
+"""A room scene (mode `room`) against the synthetic truth of its photo.
 
     out_dir/metrics.json     the numbers below (docs/room.md, "Evaluation")
     out_dir/photo.png        the room scene rendered at the photo's camera | the photo | |error|

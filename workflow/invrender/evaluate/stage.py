@@ -1,4 +1,4 @@
-"""The `evaluate` stage: a recovered scene against the truth (MILO section 4, issue 11 item 5).
+"""The `evaluate` stage: a recovered scene against the truth (MILO section 4).
 
     out_dir/metrics.json           every number below (docs/evaluate.md lists the keys)
     out_dir/maps_<map>.png         recovered | truth at the same surface points | |error|
@@ -15,9 +15,9 @@
 4. Accuracy against training time (``snapshots.py``): 1. for every snapshot, and the novel-view
    PSNR at ``snapshot_spp`` (0: not rendered).
 
-A duplicates scene (issue 13) has other outputs and other metrics: ``run_duplicates`` scores its
+A duplicates scene has other outputs and other metrics: ``run_duplicates`` scores its
 masks, poses and shared mesh (``duplicates.py``) into the same layout (metrics.json, outlines_<image>.png),
-and with its recovered scene directory the shared material, the sky and relighting (issue 14,
+and with its recovered scene directory the shared material, the sky and relighting (SfD Tables 1 and 2,
 ``appearance.py``, ``relight.py``).
 """
 

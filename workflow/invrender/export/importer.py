@@ -12,7 +12,7 @@ into a scene directory.
 - kg: the export's exact cube map while the DomeLight's texture is the export's, else the
   lat-long texture resampled to the cube (area-weighted: scene/cubemap.py).
 - Cameras: every UsdGeom.Camera (cameras.py), the exact COLMAP camera where it is untouched.
-- Duplicates: instances become poses again (scene.json metadata `poses`, DESIGN.md form), so the
+- Duplicates: instances become poses again (scene.json metadata `poses`, in poses.json's form), so the
   next export instances them again; the names of prims become instance names.
 - A stage with objects (prims with invrender:role "object", the export of a v2 scene) comes back
   as a v2 scene instead (`objects_to_scene`): each object with its transform and its meshes in its

@@ -1,6 +1,6 @@
 """Duplicates as USD native instancing: one prototype mesh, one instance per recovered pose.
 
-The duplicates mode recovers one shared mesh and material and a pose per copy (DESIGN.md:
+The duplicates mode recovers one shared mesh and material and a pose per copy (scene/poses.py:
 `duplicates/poses.json`, `{"convention", "instances": [{"instance_id", "mask_value",
 "registered", "T_obj2world"}]}`, p_world = T [p_obj, 1]). In the scene directory each copy is
 the faces whose instance id is the pose's, all sharing the object's atlas UVs. The prototype is

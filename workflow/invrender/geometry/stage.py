@@ -5,7 +5,7 @@
     out_dir/geometry.json  the report: input kind, what cleaning removed, face counts before and
                            after simplification, atlas size, utilisation and texel density
 
-The input is taken as it is (meters, +Y up: DESIGN.md's geometry convention); nothing is moved
+The input is taken as it is (meters, +Y up: docs/scene-format.md, "Conventions"); nothing is moved
 or scaled. The directory appears whole or not at all (``atomic_dir``); bad input is refused by
 ``load_geometry`` before any work starts.
 """

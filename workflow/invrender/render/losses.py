@@ -1,7 +1,7 @@
 """Losses shared by the training stages: the image loss on the path tracer's estimates (MILO
 Eq. 5 and its squared forms), whose derivative per ray the adjoint takes, and the energy bound
 of the material model (kd + ks <= 1 per channel: the Lambert and specular lobes together may not
-reflect more than arrives, DESIGN.md)."""
+reflect more than arrives, docs/renderer.md)."""
 
 from __future__ import annotations
 

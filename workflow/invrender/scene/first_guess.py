@@ -22,7 +22,7 @@ log = logging.getLogger(__name__)
 
 FIRST_GUESS = (
     "kd: the photograph's radiance at each texel (median over the copies that see it), a first guess under a "
-    "uniform white sky (kg = 1); ks 0.04, ka 0.1: the material stage (issue 14) recovers them"
+    "uniform white sky (kg = 1); ks 0.04, ka 0.1: the material stage (duplicates_material) recovers them"
 )
 SKY_CUBE = 8
 

@@ -1,4 +1,4 @@
-"""poses.json: the pose of each copy of an object (the duplicates mode's output, DESIGN.md).
+"""poses.json: the pose of each copy of an object (the duplicates mode's output).
 
     {"convention": "p_world = T_obj2world @ [p_obj, 1]; ...",
      "instances": [{"instance_id": 1, "mask_value": 1, "registered": true,
@@ -51,7 +51,7 @@ def read_poses(path) -> dict:
     """Read and validate a poses.json; returns the document."""
     path = Path(path)
     if not path.is_file():
-        raise SceneError(path, "(file)", "an existing poses.json (DESIGN.md: duplicates/poses.json)")
+        raise SceneError(path, "(file)", "an existing poses.json (the duplicates stage's duplicates/poses.json)")
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -1,4 +1,4 @@
-"""A room-mode scene (PSDR-Room section 4, issue 16 item 7): the room stages' outputs as one
+"""A room-mode scene (PSDR-Room section 4): the room stages' outputs as one
 version-2 scene directory's content, seen by the photo's camera.
 
 ``assemble_room(room, objects, lights, materials, assets)`` takes

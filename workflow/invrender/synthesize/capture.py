@@ -8,7 +8,7 @@
       ground_truth/scene/     the scene directory (write_scene): mesh with UVs, maps, cameras
       ground_truth/masks/<view>.png  true instance ids from the renderer's instance-id AOV
                               (uint16, 0 = none)
-      ground_truth/poses.json duplicates only: true T_obj2world per instance (DESIGN.md form)
+      ground_truth/poses.json duplicates only: true T_obj2world per instance (scene/poses.py)
       ground_truth/object.ply duplicates only: the shared object mesh in its own frame
 
 Everything outside ground_truth/ stands for what a user brings; only an evaluation reads

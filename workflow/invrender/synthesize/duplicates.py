@@ -116,8 +116,9 @@ FLOOR, OBJECT = 0, 1  # part labels of the template: the floor, then the object'
 
 
 def _preset(kind: str, count: int, hd: bool) -> dict:
-    """A fixture of issue 13: ``count`` copies of ``kind``, upright, upside down and lying in
-    turn, turned about the floor normal, some touching, under a camera 60 degrees above the floor.
+    """A benchmark fixture (docs/duplicates-fixtures.md): ``count`` copies of ``kind``, upright,
+    upside down and lying in turn, turned about the floor normal, some touching, under a camera
+    60 degrees above the floor.
     The CI (320 x 240) and HD (1600 x 1200) versions are the same scene: every pixel length
     (margin included) scales by 5, so the placement draws the same poses."""
     scale = 5 if hd else 1
@@ -520,7 +521,7 @@ def _place(obj_positions, shape: ConvexShape, camera, cfg, rng):
 
 def make_duplicates(config: dict | None = None) -> tuple[Scene, dict]:
     """Build the duplicates scene and its JSON-serialisable metadata (with ``poses`` in the
-    DESIGN.md poses.json form). ``config`` overrides ``DUPLICATES_DEFAULTS`` (or the preset it
+    poses.json form of scene/poses.py). ``config`` overrides ``DUPLICATES_DEFAULTS`` (or the preset it
     names) key by key."""
     cfg = resolve_config(config)
     _check_placement(cfg)  # before the atlas is baked

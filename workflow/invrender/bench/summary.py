@@ -1,0 +1,169 @@
+"""`invrender bench summary`: the README's table of headline results, made from the JSON files the
+benchmarks wrote under docs/benchmarks/ and written between two marker lines of README.md.
+
+    invrender bench summary [--out docs/benchmarks] [--readme README.md]
+
+It reads (relative to ``--out``, where the benchmarks write):
+
+    duplicates_tracks/duplicates.json             bench duplicates, variant provided-asift-tracks:
+                                                  poses and shared mesh from the photograph alone
+    duplicates_tracks/duplicates_material.json    bench duplicates-material on those poses
+    room.json                                     bench room, its `stages` rows
+    accuracy/accuracy.json                        bench accuracy: the demo room's knees
+
+Nothing is measured or computed here: every cell is a number of those files (the paper's too,
+which the benchmarks store beside ours), formatted. Under the table it writes the command and the
+date it ran. tests/bench/test_bench_summary.py fails when the README's table is not what the
+committed files give, so a table edited by hand, or a benchmark re-run without this, is caught.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import re
+from pathlib import Path
+
+from ..scene.types import SceneError
+
+BEGIN = "<!-- bench summary: begin (written by `invrender bench summary` from docs/benchmarks/*.json) -->"
+END = "<!-- bench summary: end -->"
+COMMAND = "invrender bench summary"
+SOURCES = {
+    "poses": "duplicates_tracks/duplicates.json",
+    "material": "duplicates_tracks/duplicates_material.json",
+    "room": "room.json",
+    "accuracy": "accuracy/accuracy.json",
+}
+HEADER = ("result", "scenes", "invrender", "paper")
+DATE = re.compile(r"on (\d{4}-\d{2}-\d{2}) from")
+
+# (what, source, our key, paper key, format): one row per line, the scenes in the benchmark's order
+SFD_ROWS = (
+    ("Structure from Duplicates: rotation error, mean [deg]", "poses", "rot_after_mean", "paper_rot", ".3f"),
+    ("translation error [object diagonal]", "poses", "trans_after_mean", "paper_trans", ".4f"),
+    ("shared mesh, Chamfer distance [object diagonal]", "poses", "chamfer", "paper_chamfer", ".4f"),
+    ("albedo PSNR [dB]", "material", "albedo_psnr_db", "albedo_psnr_db_paper_copies", ".2f"),
+    ("relighting PSNR, copies rearranged [dB]", "material", "relighting_psnr_db", "relighting_psnr_db_paper", ".2f"),
+    ("environment MSE", "material", "env_mse", "env_mse_paper_copies", ".3f"),
+)
+ROOM_ROWS = (
+    ("PSDR-Room: room corners in view, error [m]", "visible_corner_refined", ".3f"),
+    ("mask IoU over the six classes", "iou_mean", ".3f"),
+    ("photo PSNR at the photo's camera [dB]", "psnr_db", ".2f"),
+    ("albedo PSNR on the surface [dB]", "albedo_psnr_db", ".2f"),
+    ("light power into the room / the truth's", "power_ratio", ".2f"),
+)
+
+
+def load(bench_dir) -> dict[str, dict]:
+    """The four JSON files, by their key in SOURCES; a missing or unreadable one is refused."""
+    docs = {}
+    for key, name in SOURCES.items():
+        path = Path(bench_dir) / name
+        try:
+            docs[key] = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as error:
+            raise SceneError(path, "(file)", f"a benchmark's JSON report ({error})") from None
+    return docs
+
+
+def _by_scene(doc: dict, source: str, **match) -> list[dict]:
+    """The table rows of ``doc`` that match, one per scene of its settings, in that order."""
+    rows = []
+    for scene in doc["settings"]["scenes"]:
+        found = [r for r in doc["table"] if r["scene"] == scene and all(r.get(k) == v for k, v in match.items())]
+        if len(found) != 1 or found[0].get("error"):
+            raise SceneError(SOURCES[source], f"table, scene {scene}", f"one finished row matching {match or 'it'}")
+        rows.append(found[0])
+    return rows
+
+
+def _join(values, fmt: str) -> str:
+    return " / ".join("-" if v is None else format(v, fmt) for v in values)
+
+
+def rows(docs: dict[str, dict]) -> list[tuple[str, str, str, str]]:
+    """(result, scenes, invrender, paper) for every line of the table."""
+    sfd = {"poses": _by_scene(docs["poses"], "poses"), "material": _by_scene(docs["material"], "material")}
+    copies = " / ".join(str(r["copies"]) for r in sfd["material"]) + " boxes"
+    out = []
+    for what, source, ours, paper, fmt in SFD_ROWS:
+        theirs = [r[paper] for r in sfd[source]]
+        # relighting has no per-count figure in SfD's Table 2: its Table 1 (one view) is the one
+        note = "Table 1, one view: " if paper == "relighting_psnr_db_paper" else "Table 2: "
+        if len(set(theirs)) == 1:
+            theirs = theirs[:1]
+        out.append((what, copies, _join([r[ours] for r in sfd[source]], fmt), note + _join(theirs, fmt)))
+    room = _by_scene(docs["room"], "room", row="stages")
+    layouts = " / ".join(r["scene"] for r in room)
+    for what, key, fmt in ROOM_ROWS:
+        out.append((what, layouts, _join([r[key] for r in room], fmt), "not reported"))
+    accuracy = docs["accuracy"]
+    scene = f"demo room, {accuracy['camera']['width']} x {accuracy['camera']['height']}"
+    forward, recovery = accuracy["knees"]["forward"], accuracy["knees"]["recovery"]
+    out.append(
+        (
+            "Accuracy against time: the renders' knee",
+            scene,
+            f"{forward['row']['spp']} spp: RMSE {forward['error']:.3f} in {forward['row']['time_s']:.1f} s",
+            "-",
+        )
+    )
+    row = recovery["row"]
+    out.append(
+        (
+            "the training's knee (MILO-Net)",
+            scene,
+            f"`{row['label']}`, iteration {row['iteration']}: {row['error_name']} {recovery['error']:.3f} "
+            f"in {row['time_s']:.0f} s",
+            "-",
+        )
+    )
+    return out
+
+
+def block(bench_dir, date: str, base=".") -> str:
+    """The lines between the markers: the table, then the command and ``date`` (YYYY-MM-DD). The
+    sources are named relative to ``base``, the README's directory."""
+    where = Path(os.path.relpath(Path(bench_dir).resolve(), Path(base).resolve())).as_posix()
+    lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in rows(load(bench_dir))]
+    sources = ", ".join(f"`{name}`" for name in SOURCES.values())
+    lines += ["", f"Generated by `{COMMAND}` on {date} from {where}/: {sources}."]
+    return "\n".join(lines) + "\n"
+
+
+def split(text: str, path="README.md") -> tuple[str, str, str]:
+    """(before, between, after) the marker lines of ``text``, the markers in before and after."""
+    lines = text.splitlines(keepends=True)
+    starts = [i for i, line in enumerate(lines) if line.rstrip("\n") == BEGIN]
+    ends = [i for i, line in enumerate(lines) if line.rstrip("\n") == END]
+    if len(starts) != 1 or len(ends) != 1 or starts[0] > ends[0]:
+        raise SceneError(path, "bench summary markers", f"one line {BEGIN!r}, then one line {END!r}")
+    start, end = starts[0], ends[0]
+    return "".join(lines[: start + 1]), "".join(lines[start + 1 : end]), "".join(lines[end:])
+
+
+def date_of(between: str) -> str | None:
+    """The date an earlier run wrote under the table, or None."""
+    found = DATE.search(between)
+    return found.group(1) if found else None
+
+
+def rewrite(readme, bench_dir, date: str | None = None) -> str:
+    """Write the table into ``readme`` between its markers (nothing else changes); returns it."""
+    readme = Path(readme)
+    before, _, after = split(readme.read_text(encoding="utf-8"), readme)
+    text = block(bench_dir, date or datetime.date.today().isoformat(), readme.parent)
+    readme.write_text(before + text + after, encoding="utf-8")
+    return text
+
+
+def run(quick: bool, out, device=None, readme=None) -> dict:
+    """The bench entry point (``quick`` and ``device`` are not used: nothing runs)."""
+    readme = Path(readme or "README.md")
+    text = rewrite(readme, out)
+    print(text, end="")
+    return {"readme": str(readme), "table": text}
