@@ -264,6 +264,7 @@ def test_a_room_capture_in_its_own_layout_says_what_it_lacks(tmp_path):
     }
     result = dry_run(tmp_path, scenes)
     assert "scene 'den': the room capture 'den' lacks a depth map (capture.depth, or depth.exr" in result.stdout
-    assert "panoptic.png and panoptic.json in the capture): the room stages will stop asking for them" in result.stdout
+    lacks = "panoptic.png and panoptic.json or panoptic.csv in the capture): the room stages will stop asking for them"
+    assert lacks in result.stdout
     assert "scene 'den': no field of view" in result.stdout and "vanishing points" in result.stdout
     assert "scene 'full': the room capture" not in result.stdout and "scene 'full': no field" not in result.stdout

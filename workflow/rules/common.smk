@@ -343,6 +343,19 @@ def cameras_file(capture):
     return None
 
 
+def partial_model(capture):
+    """A sparse/ (or sparse/0/) that holds half a COLMAP model, cameras without images or
+    the reverse, as (the folder, the file it has, the half it lacks); else None."""
+    for candidate in ("sparse/0", "sparse"):
+        folder = Path(capture, candidate)
+        cameras = sorted(folder.glob("cameras.*"))
+        images = sorted(folder.glob("images.*"))
+        if bool(cameras) != bool(images):
+            lacks = "images" if cameras else "cameras"
+            return folder, (cameras or images)[0].name, lacks
+    return None
+
+
 def capture_mesh(capture):
     """A capture's mesh or point cloud: the one `mesh` names, else mesh.ply or mesh.obj in it;
     None if there is none."""
@@ -481,9 +494,18 @@ def _check_duplicates(name, capture):
 
 
 # The room capture's own layout (scene/room_photo.py): files at the top of the capture, found
-# without a key naming them (the photograph's are PHOTO_NAMES).
+# without a key naming them (the photograph's are PHOTO_NAMES): the depth map, and the panoptic
+# segmentation's id image and its label table (JSON, else CSV).
 ROOM_DEPTH = "depth.exr"
-ROOM_SEGMENTATION = ("panoptic.png", "panoptic.json")
+ROOM_IDS = "panoptic.png"
+ROOM_LABELS = ("panoptic.json", "panoptic.csv")
+
+
+def _room_segmentation(path):
+    """(the id image, the label table) found in a room capture's layout, each None if absent."""
+    ids = path / ROOM_IDS
+    labels = next((path / f for f in ROOM_LABELS if (path / f).is_file()), None)
+    return (ids if ids.is_file() else None), labels
 
 
 def _room_missing(capture):
@@ -494,12 +516,10 @@ def _room_missing(capture):
         missing.append(
             f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
         )
-    if "segmentation" not in capture and not all(
-        (path / f).is_file() for f in ROOM_SEGMENTATION
-    ):
+    if "segmentation" not in capture and None in _room_segmentation(path):
         missing.append(
             "a panoptic segmentation (capture.segmentation {ids, labels}, or "
-            f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"
+            f"{ROOM_IDS} and {' or '.join(ROOM_LABELS)} in the capture)"
         )
     return missing
 
@@ -515,9 +535,10 @@ def has_room_inputs(scene):
 
 def _check_room(name, capture):
     """The photograph (photo.exr/png/jpg, or images/ with one, or `image`); depth and a panoptic
-    segmentation named or in the capture's layout. What is missing is said now: the room stages
-    will stop without depth or segmentation (nothing here can estimate them), and estimate a
-    missing field of view from vanishing points."""
+    segmentation named or in the capture's layout (half a segmentation there is refused). What
+    is missing is said now: the room stages will stop without depth or segmentation (nothing
+    here can estimate them), and estimate a field of view not given from vanishing
+    points."""
     path = Path(capture["path"])
     _check_photograph(name, capture)
     if "depth" in capture:
@@ -525,6 +546,17 @@ def _check_room(name, capture):
     if "segmentation" in capture:
         _named_file(name, "segmentation.ids", (".png",))
         _named_file(name, "segmentation.labels", (".json", ".csv"))
+    else:
+        ids, labels = _room_segmentation(path)
+        if (ids is None) != (labels is None):
+            have = ids or labels
+            lack = " or ".join(ROOM_LABELS) if labels is None else ROOM_IDS
+            _refuse(
+                name,
+                "capture.segmentation",
+                f"not set, and {str(have)!r} is there without its other half: put {lack} "
+                "beside it, or name both with capture.segmentation {ids, labels}",
+            )
     missing = _room_missing(capture)
     if missing:
         logger.warning(
@@ -566,6 +598,15 @@ def _check_capture(name):
                 f"a {mode(name)} scene takes no {key} (it is for {' and '.join(modes)} "
                 f"scenes; scenes.{name}.mode sets the mode)",
             )
+    partial = partial_model(path)
+    if partial:
+        folder, has, lacks = partial
+        _refuse(
+            name,
+            "capture.path",
+            f"{str(folder)!r} holds {has} but no {lacks}.txt or {lacks}.bin: a COLMAP model "
+            "is both; complete it (or remove the folder, if the capture has no model)",
+        )
     MODE_CHECKS[mode(name)](name, capture)
 
 
