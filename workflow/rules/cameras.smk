@@ -2,10 +2,11 @@ rule cameras:
     """The capture's cameras (COLMAP model, text or binary, or transforms.json), read by the one
     loader and written back as a COLMAP text model, with images/: each camera's image, checked
     (size, finite pixels) and linked, or for a panorama its six cube faces. What every later
-    stage reads."""
+    stage reads. A duplicates or room capture's one photograph: the folder it is in is the images
+    folder, or with a lens (no model) it is the source."""
     input:
         cameras=capture_cameras_input,
-        images=capture_path("images"),
+        images=capture_images,
     output:
         directory("results/{scene}/cameras"),
     log:

@@ -151,6 +151,9 @@ MODE_STAGES = _SCENE_SCHEMA["properties"]["mode"]["x-stages"]
 KIND_MODE = {"room": "multiview", "duplicates": "duplicates", "room_photo": "room"}
 # Image files a capture's images/ may hold, the preferred first: an EXR before its PNG preview.
 IMAGE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
+# The photograph of a duplicates or room capture at the capture's top, found without a key naming
+# it (scene/room_photo.py's PHOTO_NAMES, the room stages' reader): the first present is the one.
+PHOTO_NAMES = ("photo.exr", "photo.png", "photo.jpg", "photo.jpeg")
 MESH_NAMES = ("mesh.ply", "mesh.obj")
 
 
@@ -340,6 +343,19 @@ def cameras_file(capture):
     return None
 
 
+def partial_model(capture):
+    """A sparse/ (or sparse/0/) that holds half a COLMAP model, cameras without images or
+    the reverse, as (the folder, the file it has, the half it lacks); else None."""
+    for candidate in ("sparse/0", "sparse"):
+        folder = Path(capture, candidate)
+        cameras = sorted(folder.glob("cameras.*"))
+        images = sorted(folder.glob("images.*"))
+        if bool(cameras) != bool(images):
+            lacks = "images" if cameras else "cameras"
+            return folder, (cameras or images)[0].name, lacks
+    return None
+
+
 def capture_mesh(capture):
     """A capture's mesh or point cloud: the one `mesh` names, else mesh.ply or mesh.obj in it;
     None if there is none."""
@@ -416,21 +432,40 @@ def _check_multiview(name, capture):
         )
 
 
+def find_photograph(capture):
+    """The photograph of a duplicates or room capture (its config mapping), where the room
+    stages' reader (scene/room_photo.py) looks for it: the file `image` names; else the first of
+    PHOTO_NAMES at the capture's top (an EXR before its PNG preview); else the one image of
+    images/. None if there is none of these (images/ missing, empty or with several)."""
+    path = Path(capture["path"])
+    if "image" in capture:
+        return path / capture["image"]
+    for photo in PHOTO_NAMES:
+        if (path / photo).is_file():
+            return path / photo
+    images = photographs(path / "images")
+    return images[0] if len(images) == 1 else None
+
+
 def _check_photograph(name, capture):
     """One photograph, and its cameras at most one way (a model, or a field of view)."""
     path = capture["path"]
     if "image" in capture:
         _named_file(name, "image", IMAGE_SUFFIXES)
-    else:
+    elif find_photograph(capture) is None:
         images = photographs(Path(path, "images"))
-        if len(images) != 1:
-            names = ", ".join(p.name for p in images[:5]) or "none"
-            _refuse(
-                name,
-                "capture.image",
-                f"not set, and {str(Path(path, 'images'))!r} holds {len(images)} images "
-                f"({names}), not one: a {mode(name)} scene is one photograph; name it",
-            )
+        names = ", ".join(p.name for p in images[:5]) or "none"
+        others = ", ".join(p.name for p in photographs(path)[:5])
+        top = ", ".join(PHOTO_NAMES[:3])
+        _refuse(
+            name,
+            "capture.image",
+            f"not set, and {path!r} has none of {top} at its top"
+            f"{f' (it has {others})' if others else ''}, and {str(Path(path, 'images'))!r} "
+            f"holds {len(images)} images ({names}), not one: a {mode(name)} scene is one "
+            f"photograph; put it at the top as one of {top}, or alone in images/, or name "
+            "it with capture.image",
+        )
     _check_lens(name, capture)
 
 
@@ -459,10 +494,18 @@ def _check_duplicates(name, capture):
 
 
 # The room capture's own layout (scene/room_photo.py): files at the top of the capture, found
-# without a key naming them.
-ROOM_PHOTOS = ("photo.exr", "photo.png", "photo.jpg", "photo.jpeg")
+# without a key naming them (the photograph's are PHOTO_NAMES): the depth map, and the panoptic
+# segmentation's id image and its label table (JSON, else CSV).
 ROOM_DEPTH = "depth.exr"
-ROOM_SEGMENTATION = ("panoptic.png", "panoptic.json")
+ROOM_IDS = "panoptic.png"
+ROOM_LABELS = ("panoptic.json", "panoptic.csv")
+
+
+def _room_segmentation(path):
+    """(the id image, the label table) found in a room capture's layout, each None if absent."""
+    ids = path / ROOM_IDS
+    labels = next((path / f for f in ROOM_LABELS if (path / f).is_file()), None)
+    return (ids if ids.is_file() else None), labels
 
 
 def _room_missing(capture):
@@ -473,12 +516,10 @@ def _room_missing(capture):
         missing.append(
             f"a depth map (capture.depth, or {ROOM_DEPTH} in the capture; EXR, any scale)"
         )
-    if "segmentation" not in capture and not all(
-        (path / f).is_file() for f in ROOM_SEGMENTATION
-    ):
+    if "segmentation" not in capture and None in _room_segmentation(path):
         missing.append(
             "a panoptic segmentation (capture.segmentation {ids, labels}, or "
-            f"{' and '.join(ROOM_SEGMENTATION)} in the capture)"
+            f"{ROOM_IDS} and {' or '.join(ROOM_LABELS)} in the capture)"
         )
     return missing
 
@@ -494,19 +535,28 @@ def has_room_inputs(scene):
 
 def _check_room(name, capture):
     """The photograph (photo.exr/png/jpg, or images/ with one, or `image`); depth and a panoptic
-    segmentation named or in the capture's layout. What is missing is said now: the room stages
-    will stop without depth or segmentation (nothing here can estimate them), and estimate a
-    missing field of view from vanishing points."""
+    segmentation named or in the capture's layout (half a segmentation there is refused). What
+    is missing is said now: the room stages will stop without depth or segmentation (nothing
+    here can estimate them), and estimate a field of view not given from vanishing
+    points."""
     path = Path(capture["path"])
-    if "image" in capture or not any((path / photo).is_file() for photo in ROOM_PHOTOS):
-        _check_photograph(name, capture)
-    else:
-        _check_lens(name, capture)
+    _check_photograph(name, capture)
     if "depth" in capture:
         _named_file(name, "depth", (".exr",))
     if "segmentation" in capture:
         _named_file(name, "segmentation.ids", (".png",))
         _named_file(name, "segmentation.labels", (".json", ".csv"))
+    else:
+        ids, labels = _room_segmentation(path)
+        if (ids is None) != (labels is None):
+            have = ids or labels
+            lack = " or ".join(ROOM_LABELS) if labels is None else ROOM_IDS
+            _refuse(
+                name,
+                "capture.segmentation",
+                f"not set, and {str(have)!r} is there without its other half: put {lack} "
+                "beside it, or name both with capture.segmentation {ids, labels}",
+            )
     missing = _room_missing(capture)
     if missing:
         logger.warning(
@@ -548,6 +598,15 @@ def _check_capture(name):
                 f"a {mode(name)} scene takes no {key} (it is for {' and '.join(modes)} "
                 f"scenes; scenes.{name}.mode sets the mode)",
             )
+    partial = partial_model(path)
+    if partial:
+        folder, has, lacks = partial
+        _refuse(
+            name,
+            "capture.path",
+            f"{str(folder)!r} holds {has} but no {lacks}.txt or {lacks}.bin: a COLMAP model "
+            "is both; complete it (or remove the folder, if the capture has no model)",
+        )
     MODE_CHECKS[mode(name)](name, capture)
 
 
@@ -694,19 +753,6 @@ def capture_dir(wildcards):
     return SCENES[wildcards.scene]["capture"]["path"]
 
 
-def capture_path(name):
-    """Input function for <capture>/<name>. A synthetic capture is one directory output, so the
-    rule depends on that directory; a user's capture on the file itself, so that editing it
-    re-runs the rules that read it."""
-
-    def function(wildcards):
-        if is_synthetic(wildcards.scene):
-            return capture_dir(wildcards)
-        return os.path.join(capture_dir(wildcards), name)
-
-    return function
-
-
 def _lacks(wildcards, what):
     scene = wildcards.scene
     raise WorkflowError(
@@ -748,11 +794,30 @@ def capture_cameras(wildcards):
 
 
 def photograph(scene):
-    """The one photograph of a duplicates or room capture."""
-    capture = SCENES[scene]["capture"]
-    if "image" in capture:
-        return Path(capture["path"], capture["image"])
-    return photographs(Path(capture["path"], "images"))[0]
+    """The one photograph of a duplicates or room capture (find_photograph's; the checks have
+    refused a capture without one)."""
+    return find_photograph(SCENES[scene]["capture"])
+
+
+def images_folder(wildcards):
+    """The folder the capture's cameras name their images relative to (the cameras rule's
+    --images): a synthetic or multiview capture's images/; the folder that holds a duplicates or
+    room capture's photograph (images/, or the capture itself for a photo.exr there)."""
+    scene = wildcards.scene
+    if is_synthetic(scene) or mode(scene) == "multiview":
+        return os.path.join(capture_dir(wildcards), "images")
+    return str(photograph(scene).parent)
+
+
+def capture_images(wildcards):
+    """The cameras rule's images: a synthetic capture is one directory output, so the rule
+    depends on that directory; a user's capture on its images/ or its one photograph, so that
+    replacing one re-runs the rule."""
+    if is_synthetic(wildcards.scene):
+        return capture_dir(wildcards)
+    if mode(wildcards.scene) == "multiview":
+        return images_folder(wildcards)
+    return str(photograph(wildcards.scene))
 
 
 def cameras_options(wildcards):
@@ -761,7 +826,7 @@ def cameras_options(wildcards):
     if key:
         value = SCENES[wildcards.scene]["capture"][key]
         return f"--{key.replace('_', '-')} {value}"
-    return f"--images {shlex.quote(os.path.join(capture_dir(wildcards), 'images'))}"
+    return f"--images {shlex.quote(images_folder(wildcards))}"
 
 
 def capture_cameras_input(wildcards):
