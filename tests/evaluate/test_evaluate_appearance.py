@@ -50,6 +50,22 @@ def scaled(atlas: Atlas, kd=1.0, ka=1.0) -> Atlas:
     return Atlas(kd=atlas.kd * kd, ks=atlas.ks, ka=atlas.ka * ka, ke=atlas.ke, kw=atlas.kw)
 
 
+def test_the_constant_guess_is_the_surface_mean_and_a_perfect_recovery_beats_it(box_truth):
+    truth, recovered, atlas = box_truth
+    out = errors(truth, recovered, atlas, atlas)
+    guess = out["constant_guess"]
+    corr = ap.aligned_correspondence(recovered, atlas.atlas_shape, FRAME, truth, atlas.atlas_shape)
+    kd = corr.truth_values(atlas.kd)
+    assert guess["map_mse"]["kd"] == pytest.approx(kd.var(axis=0).mean(), rel=1e-5)
+    flat = Atlas(
+        kd=np.broadcast_to(kd.mean(axis=0), atlas.kd.shape), ks=atlas.ks, ka=atlas.ka, ke=atlas.ke, kw=atlas.kw
+    )
+    assert errors(truth, recovered, flat, atlas)["albedo"]["psnr_db"] == pytest.approx(
+        guess["albedo"]["psnr_db"], rel=1e-9
+    )
+    assert guess["albedo"]["psnr_db"] < out["albedo"]["psnr_db"] - 10
+
+
 def test_a_recovery_exact_up_to_its_object_frame_scores_the_cap_once_aligned(box_truth):
     truth, recovered, atlas = box_truth
     out = errors(truth, recovered, atlas, atlas)

@@ -315,14 +315,22 @@ def aligned_correspondence(
 
 
 def surface_errors(recovered: Atlas, truth: Atlas, corr) -> dict:
-    """Albedo and roughness (module docstring) and plain MSEs of kd, ks, ka over the covered texels."""
+    """Albedo and roughness (module docstring) and plain MSEs of kd, ks, ka over the covered
+    texels; beside them the same of the best constant guess, each map the truth's mean over the
+    surface, which a recovery has to beat by a wide margin."""
     rec = {m: np.asarray(getattr(recovered, m))[corr.mask] for m in ("kd", "ks", "ka")}
     true = {m: corr.truth_values(getattr(truth, m)) for m in ("kd", "ks", "ka")}
+    constant = {m: np.broadcast_to(values.mean(axis=0), values.shape) for m, values in true.items()}
     return {
         "albedo": albedo_errors(rec["kd"], true["kd"]),
         "roughness": roughness_errors(rec["ka"], true["ka"]),
         "map_mse": {m: mse(rec[m], true[m]) for m in rec},
         "correspondence": corr.summary(),
+        "constant_guess": {
+            "albedo": albedo_errors(constant["kd"], true["kd"]),
+            "roughness": roughness_errors(constant["ka"], true["ka"]),
+            "map_mse": {m: mse(constant[m], true[m]) for m in rec},
+        },
     }
 
 

@@ -315,12 +315,13 @@ def run(
         (Path(tmp) / "metrics.json").write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
     log.info(
         "evaluate (room): photo PSNR %.2f dB, SSIM %.3f; mask IoU mean %.3f; light power ratio %s; albedo PSNR "
-        "%.2f dB; wrote %s in %.1f s",
+        "%.2f dB (a constant guess %.2f dB); wrote %s in %.1f s",
         image["psnr_db"],
         image["ssim"],
         masks["mean"] or 0.0,
         f"{lights['power_ratio']:.3f}" if lights["power_ratio"] is not None else "-",
         material["albedo"]["psnr_db"],
+        material["constant_guess"]["albedo"]["psnr_db"],
         out_dir,
         time.perf_counter() - started,
     )
