@@ -526,7 +526,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="YAML with the scene's size, counts, resolutions")
     p.add_argument("--spp", type=int, default=256)
     p.add_argument("--seed", type=int, help="overrides the config's seed (scene and noise)")
-    p.add_argument("--device", help="OpenCL device name substring (default: a GPU, else PoCL)")
+    p.add_argument(
+        "--device",
+        help="OpenCL device name substring (default: the choice `invrender devices` shows)",
+    )
     p.set_defaults(func=cmd_synthesize)
 
     p = stages.add_parser("features", help="decide which effects a scene calls for -> features.json")
@@ -543,7 +546,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="Russian roulette from this vertex on, if paths are longer (default 3; 0: off)",
     )
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a feature, e.g. specular=false")
-    p.add_argument("--device", help="OpenCL device for the escape probe (default: a GPU, else PoCL)")
+    p.add_argument(
+        "--device",
+        help="OpenCL device for the escape probe (default: the choice `invrender devices` shows)",
+    )
     p.set_defaults(func=cmd_features)
 
     p = stages.add_parser("render", help="render a scene's views (EXR + PNG preview + AOVs)")
@@ -669,7 +675,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of the unit-radiance render")
     p.add_argument("--max-width", type=int, default=96, help="width of the unit-radiance render, at most")
     p.add_argument("--seed", type=int, default=0, help="render seed")
-    p.add_argument("--device", help="OpenCL device for the unit-radiance render (default: a GPU, else PoCL)")
+    p.add_argument(
+        "--device",
+        help="OpenCL device for the unit-radiance render (default: the choice `invrender devices` shows)",
+    )
     p.set_defaults(func=cmd_room_lights)
 
     p = stages.add_parser(
@@ -692,7 +701,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=4, help="samples per pixel of each refinement render")
     p.add_argument("--max-width", type=int, default=160, help="width of the refinement's targets, at most")
     p.add_argument("--seed", type=int, default=0, help="render seed")
-    p.add_argument("--device", help="OpenCL device for the refinement's renders (default: a GPU, else PoCL)")
+    p.add_argument(
+        "--device",
+        help="OpenCL device for the refinement's renders (default: the choice `invrender devices` shows)",
+    )
     p.set_defaults(func=cmd_room_objects)
 
     p = stages.add_parser(
@@ -716,7 +728,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-retrieval", action="store_true", help="every part homogeneous (no procedural retrieval)")
     p.add_argument("--eval-width", type=int, default=256, help="width of the before/after render the PSNR is taken on")
     p.add_argument("--seed", type=int, default=0, help="render seed")
-    p.add_argument("--device", help="OpenCL device (default: a GPU, else PoCL)")
+    p.add_argument("--device", help="OpenCL device (default: the choice `invrender devices` shows)")
     p.set_defaults(func=cmd_room_materials)
 
     p = stages.add_parser("gradients", help="d(image loss)/d(map) of the starting scene -> EXR + PNG per map")

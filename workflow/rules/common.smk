@@ -1196,7 +1196,19 @@ def summary_inputs(wildcards):
 
 # ---------------------------------------------------------------------------- resources
 
-CPU_DEVICE_WORDS = ("pocl", "portable computing", "pthread", "cpu")
+# Words of a CPU device's "platform / device" (render/device.py's names): PoCL's, and Intel's CPU
+# runtime, whose platform is "Intel(R) OpenCL" (its GPUs' "Intel(R) OpenCL Graphics").
+CPU_DEVICE_WORDS = (
+    "pocl",
+    "portable computing",
+    "pthread",
+    "cpu",
+    "intel(r) opencl /",
+    "xeon",
+    "epyc",
+    "ryzen",
+    "processor",
+)
 
 
 def gpu_request(wildcards):

@@ -60,7 +60,7 @@ SCENES = {"room": "accuracy", "boxes": "accuracy_boxes"}  # scene -> folder unde
 def snakemake_command(work, budget: str, device: str | None) -> list[str]:
     command = [
         sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "--directory", str(work),
-        "--configfile", str(REPO / "config" / "config.yaml"),
+        "--configfile", str(REPO / "config" / "config.yaml"), str(REPO / "config" / "accuracy-sweep.yaml"),
         "--workflow-profile", str(REPO / "workflow" / "profiles" / "local"),
         *(f"results/{scene}/accuracy" for scene in SCENES),
         "--config", f"accuracy={{budget: {budget}}}",
