@@ -22,8 +22,8 @@ from functools import cache
 
 import pyopencl as cl
 
-from . import runtimes
-from .program import assemble_source, build, cache_root
+from .cache import cache_root
+from .program import assemble_source, build
 
 log = logging.getLogger("invrender.render.device")
 
@@ -36,8 +36,6 @@ INSTALL_HINT = (
 )
 # Environment variables through which the runtimes take compiler settings: part of a verdict's key.
 COMPILER_ENV = ("POCL_EXTRA_BUILD_FLAGS", "CL_CONFIG_CPU_TARGET_ARCH", "OCL_ICD_VENDORS")
-
-runtimes.register(cache_root())
 
 
 class DeviceError(RuntimeError):

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pyopencl as cl
 
+from .cache import cache_root
+
 KERNEL_DIR = Path(__file__).resolve().parents[3] / "kernels"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 
@@ -42,11 +44,6 @@ def assemble_source(entry: str, kernel_dir: Path = KERNEL_DIR) -> str:
         return "".join(out)
 
     return expand(entry)
-
-
-def cache_root() -> Path:
-    """Where invrender keeps what it can make again: kernel binaries, device verdicts."""
-    return Path(os.environ.get("INVRENDER_CACHE") or Path.home() / ".cache" / "invrender")
 
 
 def cache_dir() -> Path:
