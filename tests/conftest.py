@@ -42,3 +42,36 @@ def stage_scene_dir(tmp_path_factory):
     scene.cameras[0].name = "view.exr"
     write_scene(path, scene)
     return path
+
+
+# The fast tier, `pytest -n 2 -m fast`: every stage's unit tests on tiny fixtures, in under three
+# minutes on two cores, needing none of SLURM, Chromium or Blender; contributors run it while they
+# work, CI runs the whole suite. A test is in it unless its file is in FULL_SUITE_ONLY (whole
+# workflow runs and dry runs, the SLURM cluster, Blender, Mitsuba's bridge, the benchmarks'
+# harnesses, fuzzing, the CLI in processes of its own) or tests/slow_tests.txt lists it for its
+# time (tests/tiers.py makes that list from a --durations run).
+FULL_SUITE_ONLY = (
+    "workflow/",
+    "cluster/",
+    "fuzz/",
+    "bench/",
+    "mitsuba/",
+    "export/test_export_blender.py",
+    "test_cli_signals.py",
+    "test_cli_outputs.py",
+)
+SLOW_TESTS = HERE / "slow_tests.txt"
+
+
+def pytest_collection_modifyitems(config, items):
+    listed = {line.strip() for line in SLOW_TESTS.read_text().splitlines() if line.strip() and line[0] != "#"}
+    for item in items:
+        path = Path(str(item.fspath)).resolve().relative_to(HERE).as_posix()
+        if item.nodeid in listed:
+            item.add_marker(pytest.mark.slow)
+        if (
+            not item.get_closest_marker("slow")
+            and not item.get_closest_marker("benchmark")
+            and not path.startswith(FULL_SUITE_ONLY)
+        ):
+            item.add_marker(pytest.mark.fast)
