@@ -12,7 +12,7 @@ import logging
 import time
 from dataclasses import dataclass
 
-from ..render.device import DeviceError, all_devices, describe, explain_choice, kernel_check, rank
+from ..render.device import DeviceError, all_devices, candidates, describe, explain_choice, kernel_check, rank
 
 log = logging.getLogger("invrender.devices")
 
@@ -60,6 +60,7 @@ def throughput(device_name: str) -> float:
 def survey(name: str | None = None, measure: bool = True) -> tuple[list[Row], str]:
     """One row per device in the automatic choice's order, and the sentence that says which
     device a run (with `device: name`) would use and why."""
+    candidates(name)  # a name that matches nothing is refused before any build
     devices = sorted(all_devices(), key=rank)
     rows = [
         Row(describe(d), _kind(d), f"{' '.join(d.version.split()[:2])}, driver {d.driver_version}", kernel_check(d))
