@@ -180,7 +180,8 @@ RUNTIMES_HEADER = (
 
 
 def runtime_rows(bench_dir) -> list[tuple[str, ...]]:
-    """One row per runtime and bounce count, fastest runtime first (samples per second at B = 3)."""
+    """One row per runtime and bounce count, the fastest runtime first: by its time to equal RMSE
+    against Mitsuba's in the same run at the first bounce count (the runs' loads differ)."""
     runs = []
     for path in sorted((Path(bench_dir) / RUNTIMES).glob("*/render.json")):
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -188,7 +189,7 @@ def runtime_rows(bench_dir) -> list[tuple[str, ...]]:
         if not rows:
             raise SceneError(path, "equal_rmse", "the rows of `bench render --sections equal_rmse`")
         runs.append((doc["machine"], rows))
-    runs.sort(key=lambda run: -run[1][0]["samples_per_s_invrender"])
+    runs.sort(key=lambda run: -run[1][0]["ratio"])
     out = []
     for machine, rows in runs:
         load = " - ".join(f"{machine[key][0]:.1f}" for key in ("load_average_start", "load_average_end"))
