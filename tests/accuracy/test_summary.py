@@ -26,7 +26,11 @@ def test_summary_tables_have_a_row_per_record_and_metric(tmp_path):
             "material_mse": 0.015,
             "insertion": {"psnr_db": 26.49, "ssim": 0.964, "ncc": 0.978, "mse": 0.002},
         },
-        "maps": {"light_maps_mse": 0.023, "material_mse": 0.025},
+        "maps": {
+            "light_maps_mse": 0.023,
+            "material_mse": 0.025,
+            "constant_guess": {"light_maps_mse": 0.024, "material_mse": 0.018},
+        },
         "insertion": {"mean": {"psnr_db": 22.0, "ssim": 0.33, "ncc": 0.83, "mse": 0.006}},
         "novel_views": {"mean": {"psnr_db": 23.5}},
     }
@@ -36,9 +40,10 @@ def test_summary_tables_have_a_row_per_record_and_metric(tmp_path):
     assert document["runtimes"][1]["wall seconds"] == 38.19 and document["runtimes"][1]["peak RSS [MB]"] == 179.66
     rows = {r["metric"]: r for r in document["metrics"]}
     assert rows["material MSE"]["ours"] == 0.025 and rows["material MSE"]["paper"] == 0.015
+    assert rows["material MSE"]["a constant guess"] == 0.018 and rows["light maps MSE"]["a constant guess"] == 0.024
     assert rows["insertion PSNR [dB]"]["paper"] == 26.49
     text = (tmp_path / "summary" / "metrics.html").read_text()
-    assert text.count("<tr><td>") == 7 and "26.49" in text
+    assert text.count("<tr><td>") == 7 and "26.49" in text and "a constant guess" in text and "0.018" in text
     assert (tmp_path / "summary" / "runtime.html").read_text().count("<tr><td>") == 2
     assert read_image(tmp_path / "summary" / "runtime.png").shape[1] > 300
 
