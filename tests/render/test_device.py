@@ -135,3 +135,12 @@ def test_rank_puts_gpus_first_then_the_cpu_runtimes_in_measured_order():
 )
 def test_the_compilers_message_is_one_line(text, expected):
     assert dev.compiler_message(RuntimeError(text)) == expected
+
+
+def test_pymeshlab_imported_first_does_not_hide_intels_runtime():
+    """pymeshlab bundles an older libtbb.so.12, with which Intel's runtime fails to load; the
+    package loads the newer one first (render/runtimes.py)."""
+    code = "import invrender, pymeshlab\nfrom invrender.render.device import all_devices, describe\n"
+    code += "print([describe(d) for d in all_devices()])"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert "Intel(R) OpenCL" in run.stdout, run.stdout + run.stderr

@@ -12,6 +12,7 @@ files plus one naming each runtime installed in the environment. A user's own
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import sys
@@ -20,6 +21,10 @@ from pathlib import Path
 SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
 # Runtime libraries that pip puts in the environment's lib/ (not under site-packages).
 PIP_RUNTIMES = {"intel-cpu.icd": "libintelocl.so"}
+# Libraries of theirs loaded first, process-wide: pymeshlab bundles an older libtbb.so.12, and once
+# it is loaded Intel's runtime fails to load ("undefined symbol ... get_thread_reference_vertex"),
+# so its platform silently disappears. The newer TBB serves pymeshlab as well (the same ABI).
+PRELOAD = ("libtbb.so.12",)
 
 
 def pip_runtimes(prefix: Path | None = None) -> dict[str, Path]:
@@ -35,10 +40,20 @@ def vendor_files(prefix: Path | None = None) -> dict[str, str]:
     return files
 
 
+def preload(prefix: Path | None = None) -> None:
+    lib = Path(prefix or sys.prefix) / "lib"
+    for name in PRELOAD:
+        if (lib / name).is_file():
+            ctypes.CDLL(str(lib / name), mode=ctypes.RTLD_GLOBAL)
+
+
 def register(cache: Path) -> Path | None:
     """Point the ICD loader at the system's and the environment's runtimes (a folder under
     ``cache``); None, changing nothing, when the user set OCL_ICD_VENDORS or pip installed none."""
-    if os.environ.get("OCL_ICD_VENDORS") or not pip_runtimes():
+    if not pip_runtimes():
+        return None
+    preload()
+    if os.environ.get("OCL_ICD_VENDORS"):
         return None
     files = vendor_files()
     digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()[:16]
