@@ -14,7 +14,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-THRESHOLD = 6.0  # seconds, on two cores under the load of a shared machine (about 2.5x a quiet one)
+THRESHOLD = 3.0  # seconds, on two cores under the load of a shared machine (about 2.5x a quiet one)
 LIST = Path(__file__).with_name("slow_tests.txt")
 LINE = re.compile(r"^(\d+\.\d+)s (?:setup|call|teardown)\s+(tests/\S+)$")
 

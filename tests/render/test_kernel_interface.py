@@ -28,7 +28,8 @@ GLOBAL, PRIVATE = cl.kernel_arg_address_qualifier.GLOBAL, cl.kernel_arg_address_
 
 def built(entry: str, kernel_dir=prog.KERNEL_DIR, flags=FLAGS) -> cl.Program:
     context, _ = context_and_queue(None)
-    return cl.Program(context, prog.assemble_source(entry, kernel_dir)).build(options=list(flags))
+    # no binary cache: a program made from a cached binary has no argument info on Intel's runtime
+    return cl.Program(context, prog.assemble_source(entry, kernel_dir)).build(options=list(flags), cache_dir=False)
 
 
 def kernel_arguments(kernel: cl.Kernel) -> list[tuple[str, str, int]]:
