@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from invrender.duplicates_material.material import Ground, TexelMaterial, sky_neighbour_pairs
+from invrender.duplicates_material.material import Ground, TexelMaterial
 from invrender.duplicates_material.support import below_horizon, first_sky, irradiance_weights
 from invrender.scene.cubemap import texel_directions
+from invrender.scene.neighbours import sky_neighbour_pairs
 from invrender.scene.types import Atlas, Mesh
 
 

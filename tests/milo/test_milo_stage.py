@@ -14,8 +14,10 @@ from milo_capture import TINY, milo_args
 from invrender.cli import main
 from invrender.milo import checkpoint
 from invrender.milo.config import resolve
+from invrender.milo.importance import emitting_start, observed_radiance
 from invrender.milo.network import MiloNet
-from invrender.milo.stage import training_features
+from invrender.milo.stage import capture_scale, training_features
+from invrender.milo.texel_model import TexelMaps
 from invrender.milo.texels import Texels
 from invrender.milo.train import Training, Views, iteration_seed
 from invrender.render.adjoint import GRAD_CHANNELS
@@ -40,18 +42,25 @@ def _training(root, settings):
         cameras,
     )
     renderer = Renderer(scene, training_features(settings))
-    return Training(
-        settings, MiloNet(settings, 5.0, 0.5), Texels.from_atlas(atlas), renderer, Views.from_images(cameras, images)
-    )
+    texels = Texels.from_atlas(atlas)
+    model = MiloNet(settings, 5.0, 0.5) if settings["model"] == "network" else TexelMaps(settings, texels, 0.5)
+    training = Training(settings, model, texels, renderer, Views.from_images(cameras, images))
+    radiance, seen = observed_radiance(atlas, renderer, cameras, images)  # the lamps start emitting
+    emitting = emitting_start(radiance, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
+    model.warm_start(texels, emitting, radiance, seen, settings)
+    return training
 
 
-def test_sparse_chain_rule_equals_autograd_through_the_renderer(tiny_capture):
-    """The stage evaluates the network with gradients only on the texels the adjoint reached;
-    the reference scatters the network's maps over the whole atlas and back-propagates through
+NO_PRIORS = {"beta": 0.0, "theta": 0.0, "zeta": 0.0, "l2": 0.0, "smoothness": 0.0, "sky_smoothness": 0.0}
+NO_STEPS = {"lr_mlp": 0.0, "lr_template": 0.0, "lr_texels": 0.0}
+
+
+@pytest.mark.parametrize("model", ["network", "texels"])
+def test_sparse_chain_rule_equals_autograd_through_the_renderer(tiny_capture, model):
+    """The stage evaluates the model with gradients only on the texels the adjoint reached;
+    the reference scatters the model's maps over the whole atlas and back-propagates through
     RenderRays (render/torch_ops.py), the same forward and backward samples."""
-    settings = resolve(
-        "demo", {**TINY, "beta": 0.0, "theta": 0.0, "zeta": 0.0, "l2": 0.0, "lr_mlp": 0.0, "lr_template": 0.0}
-    )
+    settings = resolve("demo", {**TINY, **NO_PRIORS, **NO_STEPS, "specular_prior": 0.0, "model": model})
     training = _training(tiny_capture, settings)
     training.step()
     ours = [p.grad.clone() for p in training.net.parameters()]
@@ -59,7 +68,7 @@ def test_sparse_chain_rule_equals_autograd_through_the_renderer(tiny_capture):
     training.net.zero_grad(set_to_none=True)
     t, views = training.texels, training.views
     requests = ray_batch(views.cameras, settings["rays"], settings["seed"], 0)
-    out = training.net.surface(t.positions, t.normals)["maps"]
+    out = training.net.texel_surface(t, None)["maps"]
     flat = torch.zeros(t.shape[0] * t.shape[1], out.shape[1]).index_put(
         (torch.from_numpy(t.rows * t.shape[1] + t.cols),), out
     )

@@ -755,7 +755,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", required=True, help="COLMAP model directory or transforms.json")
     p.add_argument("--images", required=True, help="directory of the captured images, named as the cameras' images")
     p.add_argument("--out", required=True, help="directory to fill (weights.pt, maps.npz, log.csv, snapshots/, ...)")
-    _training_options(p, "demo", "paper, cpu or demo (docs/milo.md)")
+    _training_options(p, "demo", "paper, cpu, demo or texels (docs/milo.md)")
     p.set_defaults(func=cmd_milo)
 
     p = stages.add_parser(

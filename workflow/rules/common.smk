@@ -938,6 +938,7 @@ def export_options(wildcards):
 
 MILO_RUNTIME = {
     "demo": 30,
+    "texels": 30,
     "cpu": 300,
     "paper": 1440,
 }  # minutes a job may run (a cluster's --time)

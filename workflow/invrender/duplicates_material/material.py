@@ -19,17 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
 from ..render.losses import energy_excess
-from ..scene.atlas import AtlasTexels
-from ..scene.cubemap import texel_directions
 from ..scene.types import ATLAS_MAPS, Atlas, Maps
 
 F0 = 0.04  # a dielectric's reflectance at normal incidence (the paper's 0.02; MILO's default ks 0.04)
 KA_MIN = 1e-3  # ka > 0 keeps the Beckmann lobe finite
 SKY_LOG_LIMIT = 20.0  # kg = exp(g), g below this: no overflow while a step overshoots
-SKY_NEIGHBOURS = 8  # each sky texel's neighbours in the sky prior: the 3 x 3 block around it
 CLAMP = 1e-3  # starting values are kept this far inside (0, 1) so their logits are finite
 
 
@@ -40,35 +36,6 @@ def _logit(x) -> torch.Tensor:
 
 def _log(y) -> torch.Tensor:
     return torch.from_numpy(np.log(np.maximum(np.asarray(y, np.float64), 1e-6)).astype(np.float32))
-
-
-def neighbour_pairs(texels: AtlasTexels, radius: float) -> np.ndarray:
-    """(m, 2) flat atlas indices of covered texels within `radius` texel spacings in 3D (the
-    spacing: the median distance to the nearest other texel), across chart seams too."""
-    flat = np.flatnonzero(texels.mask.reshape(-1))
-    points = texels.position.reshape(-1, 3)[flat].astype(np.float64)
-    if len(points) < 2:
-        return np.zeros((0, 2), np.int64)
-    tree = cKDTree(points)
-    spacing = float(np.median(tree.query(points, k=2)[0][:, 1]))
-    pairs = tree.query_pairs(radius * max(spacing, 1e-12), output_type="ndarray")
-    return flat[pairs]
-
-
-def sky_neighbour_pairs(n: int, below: np.ndarray | None = None, k: int = SKY_NEIGHBOURS) -> np.ndarray:
-    """(m, 2) flat indices of each 6 x n x n cube texel and its k nearest by direction, across
-    the cube's edges too, but never across the horizon `below` ((6, n, n) bool, or None): sky
-    and ground are not alike, and the sky would bleed into the ground no copy sees. Nearest
-    rather than within a radius: a face's centre texels span about three times the solid angle
-    of its corners', so a radius leaves them alone."""
-    directions = texel_directions(n).reshape(-1, 3).astype(np.float64)
-    k = min(k, len(directions) - 1)
-    _, nearest = cKDTree(directions).query(directions, k=k + 1)
-    pairs = np.stack([np.repeat(np.arange(len(directions)), k), nearest[:, 1:].reshape(-1)], 1)
-    if below is not None:
-        side = np.asarray(below).reshape(-1)
-        pairs = pairs[side[pairs[:, 0]] == side[pairs[:, 1]]]
-    return np.unique(np.sort(pairs, 1), axis=0)
 
 
 @dataclass(frozen=True)

@@ -33,13 +33,14 @@ from ..scene.capture import read_view
 from ..scene.first_guess import first_guess, seen_texels
 from ..scene.images import read_mask, write_png_preview
 from ..scene.mesh_io import read_mesh, write_ply
+from ..scene.neighbours import neighbour_pairs, sky_neighbour_pairs
 from ..scene.packing import pack_scene
 from ..scene.poses import placements, read_poses
 from ..scene.snapshots import drop_snapshots_after, write_snapshot
 from ..scene.training_log import TrainingLog
 from ..scene.types import Atlas, SceneError
 from .config import resolve, settings_hash
-from .material import F0, Ground, TexelMaterial, neighbour_pairs, sky_neighbour_pairs
+from .material import F0, Ground, TexelMaterial
 from .rays import SUPPORT_ID, instance_images, pixel_pools
 from .support import below_horizon, first_sky, irradiance_weights, support_mesh, support_object, support_texels
 from .train import LOG_COLUMNS, Training

@@ -3,7 +3,8 @@ checkpoint to the settings it was made with.
 
 `paper` is section 3.5 as written (three 16-layer 1024-wide MLPs, 2000 iterations of 65,536
 rays at 256 spp and 10 bounces: hours on two GPUs); `cpu` is sized for a 2-core machine and the
-benchmark room; `demo` trains the embedded demo room in about a minute. `template: false` is the
+benchmark room; `demo` trains the embedded demo room in about a minute; `texels` optimises the
+maps directly, without a network (texel_model.py), at the demo's sizes. `template: false` is the
 ablation of Fig. 12: two plain MLPs, no template, no category or texture loss.
 """
 
@@ -13,7 +14,16 @@ from ..scene.settings import resolve_preset
 from ..scene.settings import settings_hash as _settings_hash
 from ..scene.types import SceneError
 
+MODELS = ("network", "texels")
 _COMMON = {
+    # What is optimised: MILO-Net ("network"), or the atlas maps texel by texel ("texels",
+    # texel_model.py: no network, smoothness priors; the settings below it marked "texels")
+    "model": "network",
+    "lr_texels": 0.05,  # texels: Adam's step on the maps' logits
+    "smoothness": 0.1,  # texels: L1 between neighbouring texels of the same kind
+    "smoothness_radius": 1.5,  # texels: neighbours within this many texel spacings in 3D
+    "sky_smoothness": 0.01,  # texels: L1 in log radiance between neighbouring sky texels
+    "specular_prior": 0.01,  # texels: L1 of ks from a dielectric's 0.04
     "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)
@@ -88,6 +98,16 @@ PRESETS = {
         "snapshot_every": 50,
     },
 }
+# The atlas maps optimised texel by texel from the per-texel guess (texel_model.py): at the demo's
+# budget it scores better than MILO-Net on both measured rooms, and longer runs do not help
+# (docs/milo.md, "The texels model").
+PRESETS["texels"] = {
+    **PRESETS["demo"],
+    "model": "texels",
+    "iterations": 40,
+    "snapshot_every": 10,
+    "checkpoint_every": 20,
+}
 
 # Settings that do not change what a run computes: a checkpoint made with other values of these
 # still resumes.
@@ -116,6 +136,8 @@ def _check(s: dict, where: str) -> None:
     for key in positive:
         if s[key] < 1:
             raise SceneError(where, key, f"a positive integer, got {s[key]!r}")
+    if s["model"] not in MODELS:
+        raise SceneError(where, "model", f"one of {', '.join(MODELS)}, got {s['model']!r}")
     if s["template"] and not 0 <= s["emitters"] <= s["materials"] - 2:
         raise SceneError(
             where, "emitters", f"0 .. materials - 2 (one window and one normal material besides), got {s['emitters']}"

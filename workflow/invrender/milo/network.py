@@ -175,6 +175,54 @@ class MiloNet(nn.Module):
         self.sky_mlp.scale_output(0.01)
         self.register_buffer("log_sky", torch.tensor(math.log(max(sky, 1e-6))))
 
+    def optimisers(self, settings: dict) -> list:
+        """AMSGrad for the MLPs, with MLP 1's l2 term (reflectance similarity) as its weight decay;
+        SGD with Nesterov momentum for the template, whose gradients are too noisy for adaptive
+        steps (section 3.5)."""
+        template = list(self.template.parameters()) if self.uses_template else []
+        first_mlp = list((self.material_mlp if self.uses_template else self.maps_mlp).parameters())
+        taken = {id(p) for p in template + first_mlp}
+        others = [p for p in self.parameters() if id(p) not in taken]
+        groups = [{"params": first_mlp, "weight_decay": settings["l2"]}, {"params": others, "weight_decay": 0.0}]
+        optimisers = [torch.optim.Adam(groups, lr=settings["lr_mlp"], amsgrad=True)]
+        if template:
+            optimisers.append(
+                torch.optim.SGD(template, lr=settings["lr_template"], momentum=settings["momentum"], nesterov=True)
+            )
+        return optimisers
+
+    def warm_start(self, texels, emitting: np.ndarray, radiance: np.ndarray, seen: np.ndarray, settings: dict) -> None:
+        """Start MLP 1 from the photographs (importance.py): texels in `emitting` (per texel, bool)
+        on the first light material, every other texel on the normal materials, by a few Adam
+        steps of cross-entropy; the light material's ke starts at those texels' mean observed
+        radiance (RGB). Training then revises both. The arrays are the atlas's (H, W)."""
+        if not self.uses_template or settings["warm_start_steps"] == 0:
+            return
+        emitting, radiance = texels.gather(emitting), texels.gather(radiance)
+        if emitting.any() and settings["emitters"] > 0:
+            self.template.start_emission(radiance[emitting].mean(0))
+        light = torch.from_numpy(emitting)
+        optimiser = torch.optim.Adam(self.material_mlp.parameters(), lr=settings["lr_mlp"])
+        inputs = torch.cat([self.coarse(texels.positions), texels.normals], -1)
+        normal_from = settings["emitters"] + 1
+        for _ in range(settings["warm_start_steps"]):
+            log_p = torch.log_softmax(self.material_mlp(inputs), -1)
+            loss = -torch.where(light, log_p[:, 0], torch.logsumexp(log_p[:, normal_from:], -1)).mean()
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+
+    def texel_surface(self, texels, rows) -> dict[str, torch.Tensor]:
+        """`surface` at the texels' rows `rows` (None: all of them)."""
+        if rows is None:
+            return self.surface(texels.positions, texels.normals)
+        return self.surface(texels.positions[rows], texels.normals[rows])
+
+    def regularisers(self, out: dict, settings: dict) -> dict[str, torch.Tensor]:
+        from .losses import regularisers  # losses reads this module's ranges
+
+        return regularisers(out, settings)
+
     def surface(self, positions: torch.Tensor, normals: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per texel: 'maps' (n, 11) through the output kernel, 'raw' before it (for the value
         loss), and with the template 'probabilities' (n, Q) and 'detail' k_t (n, 11)."""

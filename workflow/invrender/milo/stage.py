@@ -38,6 +38,7 @@ from . import checkpoint
 from .config import resolve, settings_hash
 from .importance import emitting_start, observed_radiance
 from .network import MiloNet
+from .texel_model import TexelMaps
 from .texels import Texels
 from .train import LOG_COLUMNS, Training, Views
 
@@ -117,22 +118,14 @@ def run(
     # run took 31.7 s with two threads, 14.7 s with one, measured on 2 cores).
     torch.set_num_threads(1)
     emission, sky = capture_scale(views)
-    training = Training(
-        settings,
-        MiloNet(settings, emission, sky),
-        Texels.from_atlas(atlas),
-        renderer,
-        views,
-        settings["loss_epsilon"] * sky,
-    )
+    texels = Texels.from_atlas(atlas)
+    model = MiloNet(settings, emission, sky) if settings["model"] == "network" else TexelMaps(settings, texels, sky)
+    training = Training(settings, model, texels, renderer, views, settings["loss_epsilon"] * sky)
     radiance, seen = observed_radiance(atlas, renderer, train_cams, images)
     if settings["texture_importance"]:  # section 3.5's texture importance sampling
         renderer.importance = radiance @ LUMINANCE.astype(np.float32)
-    texels = training.texels
-    training.warm_start(
-        texels.gather(emitting_start(radiance, seen, emission, settings["warm_start_fraction"])),
-        texels.gather(radiance),
-    )
+    emitting = emitting_start(radiance, seen, emission, settings["warm_start_fraction"])
+    model.warm_start(texels, emitting, radiance, seen, settings)
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     state = checkpoint.resume(out / "checkpoints", resume, settings, digests)
     if state is not None:

@@ -28,6 +28,7 @@ class Texels:
     positions: torch.Tensor  # (n, 3) in [-1, 1]
     normals: torch.Tensor  # (n, 3) unit
     shape: tuple[int, int]
+    mask: np.ndarray  # (H, W) the covered texels
     center: np.ndarray
     scale: float
 
@@ -51,6 +52,7 @@ class Texels:
             positions=torch.from_numpy(normalised.astype(np.float32)),
             normals=torch.from_numpy(normal[rows, cols].astype(np.float32)),
             shape=mask.shape,
+            mask=mask,
             center=center,
             scale=scale,
         )
@@ -66,6 +68,12 @@ class Texels:
     def gather(self, atlas: np.ndarray) -> np.ndarray:
         """The texels' rows of an (H, W, C) array."""
         return atlas[self.rows, self.cols]
+
+    def gather_grown(self, atlas: np.ndarray) -> np.ndarray:
+        """The texels' rows of an (H, W, ...) array given on the covered texels: a padding texel
+        takes its nearest covered neighbour's value, as its position does (from_atlas)."""
+        grown, _ = dilate(np.asarray(atlas), self.mask, PADDING_TEXELS)
+        return grown[self.rows, self.cols]
 
 
 def sky_directions(n: int) -> torch.Tensor:

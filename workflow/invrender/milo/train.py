@@ -26,10 +26,12 @@ from ..render.adjoint import GRAD_CHANNELS, backward, backward_seed
 from ..render.batches import iteration_seed, ray_batch  # noqa: F401 (iteration_seed: milo's, kept importable here)
 from ..render.renderer import Renderer
 from ..scene.types import ATLAS_MAPS, Camera, Maps
-from .losses import image_loss, regularisers
+from .losses import image_loss
 from .network import LOWER, MiloNet
+from .texel_model import TexelMaps
 from .texels import Texels, sky_directions
 
+PRIORS = ("category", "texture", "value", "smoothness", "sky_smoothness", "specular")  # MILO-Net's, then texels'
 CHUNK = 1 << 16  # texels per network call without gradients
 LOG_COLUMNS = (
     "iteration",
@@ -39,6 +41,9 @@ LOG_COLUMNS = (
     "category",
     "texture",
     "value",
+    "smoothness",
+    "sky_smoothness",
+    "specular",
     "texels_touched",
     "texels_with_grad",
     "dropped_samples",
@@ -69,7 +74,7 @@ class Training:
     """One run: the network, its two optimisers and schedules, where it stands."""
 
     settings: dict
-    net: MiloNet
+    net: MiloNet | TexelMaps
     texels: Texels
     renderer: Renderer
     views: Views
@@ -82,55 +87,19 @@ class Training:
     def __post_init__(self):
         s = self.settings
         self.directions = sky_directions(s["sky_resolution"])
-        net = self.net
-        template = list(net.template.parameters()) if net.uses_template else []
-        first_mlp = list((net.material_mlp if net.uses_template else net.maps_mlp).parameters())
-        taken = {id(p) for p in template + first_mlp}
-        others = [p for p in net.parameters() if id(p) not in taken]
-        # AMSGrad for the MLPs, with MLP 1's l2 term (reflectance similarity) as its weight decay
-        groups = [{"params": first_mlp, "weight_decay": s["l2"]}, {"params": others, "weight_decay": 0.0}]
-        self.optimisers = [torch.optim.Adam(groups, lr=s["lr_mlp"], amsgrad=True)]
-        if template:  # the template's gradients are too noisy for adaptive steps (section 3.5)
-            self.optimisers.append(
-                torch.optim.SGD(template, lr=s["lr_template"], momentum=s["momentum"], nesterov=True)
-            )
+        self.optimisers = self.net.optimisers(s)
         milestones = sorted({max(1, round(f * s["iterations"])) for f in s["decay_at"]})
         self.schedules = [
             torch.optim.lr_scheduler.MultiStepLR(o, milestones, gamma=s["decay"]) for o in self.optimisers
         ]
-
-    def warm_start(self, emitting: np.ndarray, radiance: np.ndarray) -> None:
-        """Start MLP 1 from the photographs (importance.py): texels in `emitting` (per texel, bool)
-        on the first light material, every other texel on the normal materials, by a few Adam
-        steps of cross-entropy; the light material's ke starts at those texels' mean observed
-        radiance (RGB). Training then revises both."""
-        net, s = self.net, self.settings
-        if not net.uses_template or s["warm_start_steps"] == 0:
-            return
-        if emitting.any() and s["emitters"] > 0:
-            net.template.start_emission(radiance[emitting].mean(0))
-        light = torch.from_numpy(emitting)
-        optimiser = torch.optim.Adam(net.material_mlp.parameters(), lr=s["lr_mlp"])
-        inputs = torch.cat([net.coarse(self.texels.positions), self.texels.normals], -1)
-        normal_from = s["emitters"] + 1
-        for _ in range(s["warm_start_steps"]):
-            log_p = torch.log_softmax(net.material_mlp(inputs), -1)
-            loss = -torch.where(light, log_p[:, 0], torch.logsumexp(log_p[:, normal_from:], -1)).mean()
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
 
     # --- the maps ---------------------------------------------------------------------------
     @torch.no_grad()
     def predict(self) -> Maps:
         """The six maps the network gives now, at the atlas resolution."""
         t = self.texels
-        values = torch.cat(
-            [
-                self.net.surface(t.positions[i : i + CHUNK], t.normals[i : i + CHUNK])["maps"]
-                for i in range(0, len(t), CHUNK)
-            ]
-        ).numpy()
+        chunks = [np.arange(i, min(i + CHUNK, len(t))) for i in range(0, len(t), CHUNK)]
+        values = torch.cat([self.net.texel_surface(t, rows)["maps"] for rows in chunks]).numpy()
         atlas = t.scatter(values, values.shape[1], LOWER.numpy())  # texels no UV reads: valid, dark, smooth
         maps = {
             name: atlas[..., c].squeeze(-1) if c.stop - c.start == 1 else atlas[..., c]
@@ -167,7 +136,7 @@ class Training:
             "wall_time": self.wall_time,
             "loss": s["alpha"] * loss + sum(stats["terms"].values()),
             "image": loss,
-            **{name: stats["terms"].get(name, 0.0) for name in ("category", "texture", "value")},
+            **{name: stats["terms"].get(name, 0.0) for name in PRIORS},
             "texels_touched": stats["touched"],
             "texels_with_grad": stats["with_grad"],
             "dropped_samples": dropped,
@@ -190,10 +159,10 @@ class Training:
         regularised = np.sort(rng.choice(len(t), size=share, replace=False))
         rows = np.union1d(touched, regularised)
         clock = time.perf_counter()
-        out = self.net.surface(t.positions[rows], t.normals[rows])
+        out = self.net.texel_surface(t, rows)
         surrogate = (out["maps"] * torch.from_numpy(texel_grad[rows].astype(np.float32))).sum()
         picked = np.searchsorted(rows, regularised)
-        terms = regularisers({name: value[picked] for name, value in out.items()}, self.settings)
+        terms = self.net.regularisers({name: value[picked] for name, value in out.items()}, self.settings)
         sky_grad = torch.from_numpy(grads["kg"].reshape(-1, 3).astype(np.float32))
         surrogate = surrogate + (self.net.sky(self.directions) * sky_grad).sum()
         for optimiser in self.optimisers:
