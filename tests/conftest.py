@@ -23,7 +23,7 @@ HELPER_DIRS = (
     "room_box",
     "room_objects",
 )
-HELPER_DIRS += ("room_materials",)
+HELPER_DIRS += ("room_materials", "bench")
 for helper_dir in (HERE, *(HERE / name for name in HELPER_DIRS)):
     if str(helper_dir) not in sys.path:
         sys.path.insert(0, str(helper_dir))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from bench_tables import printed, tables
 
 from invrender.bench.milo import ABLATION_ROWS, ROWS
 from invrender.cli import main
@@ -59,35 +60,30 @@ def run(tmp_path_factory):
     config = root / "tiny.yaml"
     config.write_text(yaml.safe_dump(TINY))
     out, work = root / "out", root / "work"
-    argv = ["bench", "milo", "--config", config, "--out", out, "--work", work, "--iterations", "3"]
+    argv = [
+        "bench",
+        "milo",
+        "--sections",
+        "paper",
+        "--config",
+        config,
+        "--out",
+        out,
+        "--work",
+        work,
+        "--iterations",
+        "3",
+    ]
     assert main(list(map(str, argv))) == 0
     arms = {arm: json.loads((work / arm / "report" / "metrics.json").read_text()) for arm in ("template", "plain")}
     markdown = (out / "milo.md").read_text()
     return tables(markdown), arms, json.loads((out / "milo.json").read_text()), markdown
 
 
-def tables(markdown: str) -> dict:
-    """{section title: [{column header: cell}]} of every table in milo.md."""
-    found = {}
-    for section in markdown.split("\n### ")[1:]:
-        title, _, body = section.partition("\n\n")
-        lines = [line for line in body.splitlines() if line.startswith("|")]
-        cells = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines]
-        found[title] = [dict(zip(cells[0], row)) for row in cells[2:]]
-    return found
-
-
 def at(document: dict, path):
     for key in path:
         document = document[key]
     return document
-
-
-def printed(cell: str, value: float, fmt: str) -> bool:
-    """`cell` is `value` printed with `fmt` (.Nf or .Ng)."""
-    digits, kind = int(fmt[1:-1]), fmt[-1]
-    tolerance = 0.5 * 10**-digits if kind == "f" else 0.5 * 10 ** (1 - digits) * abs(value)
-    return abs(float(cell) - value) <= tolerance * (1 + 1e-9)
 
 
 def test_both_tables_have_every_row(run):

@@ -41,6 +41,9 @@ def test_the_truth_on_another_mesh_and_atlas_scores_near_zero(truth_and_copy):
     # kd + 0.1 everywhere: MSE 0.1^2, up to the ~1e-5 of resampling between the two atlases
     assert perturbed["map_mse"]["kd"] == pytest.approx(0.01, abs=3e-4)
     assert perturbed["map_mse"]["ks"] == same["map_mse"]["ks"]
+    # the lamps' emission: all of it on the same surface, 1.1 x with ke 10 % up
+    assert same["emitted_power_ratio"] == pytest.approx(1.0, abs=1e-3)
+    assert perturbed["emitted_power_ratio"] == pytest.approx(1.1, abs=1e-3)
 
 
 def test_the_constant_guess_is_the_truths_surface_mean_scored_the_same_way(truth_and_copy):

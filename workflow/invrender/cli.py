@@ -992,9 +992,11 @@ def build_parser() -> argparse.ArgumentParser:
     summary.add_argument(
         "--readme", help="the README whose results table to rewrite from --out's JSON files (default README.md)"
     )
-    render = p.add_argument_group("bench render")
+    render = p.add_argument_group("bench render, bench milo")
     render.add_argument(
-        "--sections", help="comma-separated sections to run (equal_rmse, bvh, features, profile; default all)"
+        "--sections",
+        help="comma-separated sections to run (render: equal_rmse, bvh, features, profile; "
+        "milo: independent, paper; default all)",
     )
     p.set_defaults(func=cmd_bench)
     return parser

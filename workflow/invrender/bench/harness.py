@@ -474,3 +474,23 @@ def run_scenes(
     sys.stdout.write((out / f"{stem}.md").read_text())
     sys.stdout.flush()
     return report
+
+
+GEOMETRY_KEYS = (
+    "target_faces",
+    "texels_per_meter",
+    "atlas_resolution",
+    "padding",
+    "poisson_depth",
+    "min_island_fraction",
+    "min_island_faces",
+)
+
+
+def capture_geometry(work: Path, config: dict, progress: bool = False) -> None:
+    """The geometry stage on WORK/capture/mesh.ply into WORK/geometry, with a workflow config's
+    `geometry:` settings, as the rule calls it."""
+    from ..geometry import stage as geometry
+
+    settings = {key: config["geometry"][key] for key in GEOMETRY_KEYS}
+    geometry.run(work / "capture" / "mesh.ply", work / "geometry", progress=progress, **settings)

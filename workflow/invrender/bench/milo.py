@@ -41,7 +41,8 @@ import yaml
 
 from ..scene.atomic import check_output
 from ..scene.types import SceneError
-from .harness import PeakRSS, format_table, quiet_pyopencl, run_report
+from . import milo_independent
+from .harness import PeakRSS, capture_geometry, format_table, quiet_pyopencl, run_report
 
 log = logging.getLogger("invrender.bench")
 
@@ -51,6 +52,7 @@ DEFAULT_WORK = "results/bench/milo"
 QUICK_ITERATIONS = 3  # --quick: the chain's plumbing, not a measurement
 ARMS = {"template": {}, "plain": {"template": False}}  # overrides of each arm over the config's
 PAPER_TIME = "~10 h (2000 iterations, two RTX 3090)"
+SECTIONS = ["independent", "paper"]
 
 
 @dataclass(frozen=True)
@@ -224,11 +226,9 @@ def settings_from(config: dict, path, work, iterations: int | None, ablation: bo
 def shared_stages(config: dict, settings: Settings, work: Path, device, progress: bool) -> dict:
     """synthesize, cameras, geometry: what both arms start from. Returns each stage's seconds."""
     from ..cameras import stage as cameras
-    from ..geometry import stage as geometry
     from ..synthesize import stage as synthesize
 
     synthetic = config["scenes"][settings.scene]["synthetic"]
-    geo = config["geometry"]
     seconds = {}
     t0 = time.perf_counter()
     synthesize.run(
@@ -239,18 +239,7 @@ def shared_stages(config: dict, settings: Settings, work: Path, device, progress
     cameras.run(work / "capture" / "sparse", work / "cameras", images_dir=work / "capture" / "images", progress=False)
     seconds["cameras"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    geometry.run(
-        work / "capture" / "mesh.ply",
-        work / "geometry",
-        target_faces=geo["target_faces"],
-        texels_per_meter=geo["texels_per_meter"],
-        atlas_resolution=geo["atlas_resolution"],
-        padding=geo["padding"],
-        poisson_depth=geo["poisson_depth"],
-        min_island_fraction=geo["min_island_fraction"],
-        min_island_faces=geo["min_island_faces"],
-        progress=progress,
-    )
+    capture_geometry(work, config, progress)
     seconds["geometry"] = time.perf_counter() - t0
     return seconds
 
@@ -508,15 +497,39 @@ def run(
     iterations: int | None = None,
     ablation: bool = True,
     work=DEFAULT_WORK,
+    sections: str | None = None,
 ) -> dict:
-    """The chain on the config's room (both arms with `ablation`), the tables under `out`.
+    """The sections (SECTIONS; default all): `independent`, the recovery on rooms Mitsuba
+    rendered against the baselines (milo_independent.py), and `paper`, the chain on the
+    config's room beside the paper (both arms with `ablation`); the tables under `out`.
     `quick`: QUICK_ITERATIONS iterations unless `iterations` says otherwise."""
     quiet_pyopencl()
-    started, load_start = time.time(), os.getloadavg()
     config_data = load_config(config)
+    work, out = Path(work), Path(out)
+    chosen = _sections(sections)
+    report = {}
+    if "independent" in chosen:
+        out.mkdir(parents=True, exist_ok=True)
+        report["independent"] = milo_independent.run_study(
+            config_data, work / "independent", out, iterations, quick, device
+        )
+    if "paper" in chosen:
+        report["paper"] = _paper(quick, out, device, config, config_data, iterations, ablation, work)
+    return report
+
+
+def _sections(sections: str | None) -> list[str]:
+    chosen = SECTIONS if sections is None else [s.strip() for s in sections.split(",") if s.strip()]
+    unknown = [s for s in chosen if s not in SECTIONS]
+    if unknown or not chosen:
+        raise SceneError("bench milo --sections", ", ".join(unknown) or "(empty)", f"some of {', '.join(SECTIONS)}")
+    return chosen
+
+
+def _paper(quick, out: Path, device, config, config_data, iterations, ablation, work: Path) -> dict:
+    started, load_start = time.time(), os.getloadavg()
     if quick and iterations is None:
         iterations = QUICK_ITERATIONS
-    work, out = Path(work), Path(out)
     settings = settings_from(config_data, config, work, iterations, ablation)
     out.mkdir(parents=True, exist_ok=True)
     work.mkdir(parents=True, exist_ok=True)

@@ -76,6 +76,7 @@ def map_errors(
     true = {name: corr.truth_values(getattr(truth_maps, name)) for name in ATLAS_MAPS}
     subset = ball_subset(len(rec["kd"]), max_ball_texels)
     errors = _errors(rec, recovered_maps.kg, true, truth_maps.kg, subset)
+    errors["emitted_power_ratio"] = emitted_power_ratio(rec["ke"], true["ke"])
     errors["shading_balls"] = {
         "texels": int(len(subset)),
         "of_texels": int(len(rec["kd"])),
@@ -88,6 +89,13 @@ def map_errors(
     constant = {name: np.broadcast_to(values.mean(axis=0), values.shape) for name, values in true.items()}
     guess = _errors(constant, _constant_sky(truth_maps.kg), true, truth_maps.kg, subset)
     return errors | {"constant_guess": {key: guess[key] for key in ("light_maps_mse", "material_mse", "map_mse")}}
+
+
+def emitted_power_ratio(recovered_ke, true_ke) -> float | None:
+    """The surface's emission, recovered over true (summed over the corresponded texels, which
+    sample the surface evenly, and the RGB channels); None where the truth emits nothing."""
+    true_total = float(np.sum(true_ke))
+    return float(np.sum(recovered_ke)) / true_total if true_total > 0 else None
 
 
 def _constant_sky(kg) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The `texels` model: the atlas maps optimised directly, texel by texel, through the adjoint (no
-network), with smoothness and value priors; a baseline for MILO-Net and, at CPU budgets, an
+network), with smoothness priors; a baseline for MILO-Net and, at CPU budgets, an
 alternative to it (docs/milo.md measures the two).
 
 Every texel either emits or reflects, as MILO's finite-material constraint says, and which one is
@@ -7,10 +7,11 @@ decided once, from the photographs (importance.emitting_start, the same rule as 
 start): an emitter has ke = exp(e) (RGB, started at its observed radiance) and kd = ks = 0; a
 reflecting texel has kd = sigmoid(a) (RGB, started at its observed radiance over the typical
 irradiance: the per-texel guess without light transport), a grey specular ks = sigmoid(b) and a
-roughness ka, and no emission. The sky is kg = exp(g) per cube texel. Priors: an L1 difference
-between texels that are neighbours on the surface (a wall is one colour unless the photographs
-say otherwise, and texels few rays reach follow their neighbours), the same in log radiance over
-the sky, a pull of ks towards a dielectric's 0.04, and the energy bound kd + ks <= 1.
+roughness ka, and no emission; kd is a share of 1 - ks, so kd + ks <= 1 holds by construction.
+The sky is kg = exp(g) per cube texel. Priors: an L1 difference between texels that are
+neighbours on the surface (a wall is one colour unless the photographs say otherwise, and texels
+few rays reach follow their neighbours), the same in log radiance over the sky, and a pull of ks
+towards a dielectric's 0.04.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import torch
 from torch import nn
 
 from ..render.adjoint import ATLAS_CHANNELS, GRAD_CHANNELS
-from ..render.losses import energy_excess
 from ..scene.neighbours import point_neighbour_pairs, sky_neighbour_pairs
 from .network import EMITTER_KA, RANGES, SKY_LOG_LIMIT
 
@@ -73,7 +73,7 @@ class TexelMaps(nn.Module):
         radiance = texels.gather_grown(radiance)
         emitting, seen = (texels.gather_grown(a.astype(np.float32)) > 0.5 for a in (emitting, seen > 0))
         self.emitter.copy_(torch.from_numpy(emitting.astype(np.float32))[:, None])
-        self.kd_logit.copy_(_logit(reflectance_start(radiance, seen, emitting)))
+        self.kd_logit.copy_(_logit(reflectance_start(radiance, seen, emitting) / (1.0 - F0)))
         self.ke_log.copy_(torch.from_numpy(np.log(np.maximum(radiance, 1e-3)).astype(np.float32)))
 
     def optimisers(self, settings: dict) -> list:
@@ -96,8 +96,10 @@ class TexelMaps(nn.Module):
         return maps
 
     def _reflectance(self):
-        """kd (n, 3), the grey ks (n, 1) and ka on [0, 1] (n, 1) of every texel."""
-        return torch.sigmoid(self.kd_logit), torch.sigmoid(self.ks_logit), torch.sigmoid(self.ka_logit)
+        """kd (n, 3), the grey ks (n, 1) and ka on [0, 1] (n, 1) of every texel; kd is a share of
+        what ks leaves, so that no texel reflects more light than it receives (kd + ks <= 1)."""
+        ks = torch.sigmoid(self.ks_logit)
+        return torch.sigmoid(self.kd_logit) * (1.0 - ks), ks, torch.sigmoid(self.ka_logit)
 
     def texel_surface(self, texels, rows) -> dict[str, torch.Tensor]:
         maps = self._all_maps() if rows is None else self._all_maps()[torch.as_tensor(rows)]
@@ -111,10 +113,7 @@ class TexelMaps(nn.Module):
         """The priors over the whole atlas (they are cheap beside a render), `out` unused."""
         reflecting = 1.0 - self.emitter
         kd, ks, ka = self._reflectance()
-        terms = {
-            "value": settings["zeta"] * (energy_excess(kd, ks.expand(-1, 3)).sum(-1, keepdim=True) * reflecting).mean(),
-            "specular": settings["specular_prior"] * ((ks - F0).abs() * reflecting).mean(),
-        }
+        terms = {"specular": settings["specular_prior"] * ((ks - F0).abs() * reflecting).mean()}
         if len(self.pairs):
             i, j = self.pairs[:, 0], self.pairs[:, 1]
             ke = torch.log1p(self._all_maps()[:, GRAD_CHANNELS["ke"]])  # emitters: relative differences
