@@ -170,6 +170,8 @@ def test_options_of_another_benchmark_and_a_config_without_one_room_are_refused(
     config.write_text(yaml.safe_dump({"scenes": {"a": TINY["scenes"]["tiny"], "b": TINY["scenes"]["tiny"]}}))
     assert main(["bench", "milo", "--config", str(config), "--out", str(tmp_path / "out")]) == 2
     assert not (tmp_path / "out" / "milo.md").exists()
+    assert not (tmp_path / "out" / "milo-independent.md").exists()  # refused before any section ran
+    assert main(["bench", "milo", "--sections", "papr", "--out", str(tmp_path / "out")]) == 2
 
 
 def test_the_benchmark_config_is_a_room_where_recovery_can_be_judged():

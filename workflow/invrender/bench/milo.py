@@ -507,6 +507,8 @@ def run(
     config_data = load_config(config)
     work, out = Path(work), Path(out)
     chosen = _sections(sections)
+    if "paper" in chosen:  # its config is checked before any section runs
+        settings_from(config_data, config, work, iterations, ablation)
     report = {}
     if "independent" in chosen:
         out.mkdir(parents=True, exist_ok=True)
