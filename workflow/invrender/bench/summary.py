@@ -10,6 +10,8 @@ It reads (relative to ``--out``, where the benchmarks write):
     duplicates_tracks/duplicates_material.json    bench duplicates-material on those poses
     room.json                                     bench room, its `stages` rows
     accuracy/accuracy.json                        bench accuracy: the demo room's knees
+    milo-independent.json                         bench milo: rooms rendered by Mitsuba, each
+                                                  recovery beside the constant guess
 
 Nothing is measured or computed here: every cell is a number of those files (the paper's too,
 which the benchmarks store beside ours), formatted. Under the table it writes the command and the
@@ -35,6 +37,7 @@ SOURCES = {
     "material": "duplicates_tracks/duplicates_material.json",
     "room": "room.json",
     "accuracy": "accuracy/accuracy.json",
+    "milo": "milo-independent.json",
 }
 HEADER = ("result", "scenes", "invrender", "paper")
 DATE = re.compile(r"on (\d{4}-\d{2}-\d{2}) from")
@@ -58,7 +61,7 @@ ROOM_ROWS = (
 
 
 def load(bench_dir) -> dict[str, dict]:
-    """The four JSON files, by their key in SOURCES; a missing or unreadable one is refused."""
+    """The JSON files, by their key in SOURCES; a missing or unreadable one is refused."""
     docs = {}
     for key, name in SOURCES.items():
         path = Path(bench_dir) / name
@@ -84,11 +87,26 @@ def _join(values, fmt: str) -> str:
     return " / ".join("-" if v is None else format(v, fmt) for v in values)
 
 
+# (what, the arm of bench milo's independent tables, the paper's figure)
+MILO_ROWS = (
+    ("MILO: material MSE, rooms rendered by Mitsuba, `texels` preset", "texels", "Table 3: 0.015 (its rooms)"),
+    ("the same, MILO-Net (`cpu` preset)", "MILO-Net", "-"),
+    ("the same, a constant guess (the truth's mean)", "constant guess", "-"),
+)
+
+
+def milo_rows(doc: dict) -> list[tuple[str, str, str, str]]:
+    captures = doc["captures"]
+    scenes = " / ".join(f"{c['layout']} ({c['split']})" for c in captures)
+    material = [next(r for r in c["rows"] if r["metric"] == "material MSE") for c in captures]
+    return [(what, scenes, _join([m.get(arm) for m in material], ".4f"), paper) for what, arm, paper in MILO_ROWS]
+
+
 def rows(docs: dict[str, dict]) -> list[tuple[str, str, str, str]]:
     """(result, scenes, invrender, paper) for every line of the table."""
+    out = milo_rows(docs["milo"])
     sfd = {"poses": _by_scene(docs["poses"], "poses"), "material": _by_scene(docs["material"], "material")}
     copies = " / ".join(str(r["copies"]) for r in sfd["material"]) + " boxes"
-    out = []
     for what, source, ours, paper, fmt in SFD_ROWS:
         theirs = [r[paper] for r in sfd[source]]
         # relighting has no per-count figure in SfD's Table 2: its Table 1 (one view) is the one
