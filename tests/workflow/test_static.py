@@ -72,10 +72,11 @@ def test_dry_run_of_the_demo(tmp_path):
 
 
 def test_the_accuracy_sweep_config_adds_the_recovery_runs(tmp_path):
-    """config/accuracy-sweep.yaml on top of the demo: 4 MILO runs and 3 of the material stage."""
+    """config/accuracy-sweep.yaml on top of the demo: 5 runs of the room (the configured texels
+    model and MILO-Net's presets) and 3 of the material stage."""
     sweep = DEMO_CONFIG.with_name("accuracy-sweep.yaml")
     result = snakemake(tmp_path, "-n", config=[DEMO_CONFIG, sweep])
-    assert job_counts(result.stdout)["recovery_run"] == 7
+    assert job_counts(result.stdout)["recovery_run"] == 8
 
 
 def test_every_rule_is_known():
