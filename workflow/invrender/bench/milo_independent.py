@@ -90,7 +90,7 @@ def make_capture(work: Path, layout: str, split: str, config: dict, device, quic
         capture_geometry(work, config, False)
 
 
-def truth_maps(work: Path, sky_resolution: int):
+def truth_maps(work: Path):
     """The truth's maps resampled onto the recovered atlas (evaluate's correspondence), its sky."""
     from ..evaluate.correspond import DEFAULT_SAMPLES, DEFAULT_SIDE_MARGIN, correspond
     from ..evaluate.maps import truth_in_recovered_layout
@@ -148,7 +148,7 @@ def floor_scene(work: Path) -> None:
     from ..scene.snapshots import write_snapshot
 
     arm = work / "floor"
-    write_snapshot(arm / "maps.npz", truth_maps(work, 16), 0, 0.0)
+    write_snapshot(arm / "maps.npz", truth_maps(work), 0, 0.0)
     bake.run(arm / "maps.npz", work / "geometry", work / "cameras", arm / "scene")
 
 

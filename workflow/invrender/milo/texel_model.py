@@ -50,8 +50,6 @@ class TexelMaps(nn.Module):
     """One parameter per texel and channel; `surface` gives rows of the 11-channel maps in
     render/adjoint.GRAD_CHANNELS' layout, as MiloNet's does."""
 
-    uses_template = False
-
     def __init__(self, settings: dict, texels, sky: float):
         super().__init__()
         n = len(texels)

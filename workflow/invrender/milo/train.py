@@ -71,7 +71,8 @@ class Views:
 
 @dataclass
 class Training:
-    """One run: the network, its two optimisers and schedules, where it stands."""
+    """One run: the model (MILO-Net, or the texels model), its optimisers and schedules, where it
+    stands. ("lr_mlp" in the log is the first optimiser's rate: the texels' for that model.)"""
 
     settings: dict
     net: MiloNet | TexelMaps
