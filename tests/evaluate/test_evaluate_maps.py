@@ -10,7 +10,7 @@ from truths import rebaked, small_room
 
 from invrender.evaluate.balls import BALL_LIGHTS, ball_errors, ball_normals, shade_balls
 from invrender.evaluate.correspond import correspond
-from invrender.evaluate.maps import ball_subset, compress, kg_mse, map_errors
+from invrender.evaluate.maps import ball_subset, compress, kg_mse, kg_mse_outside_sun, map_errors
 from invrender.scene.atlas import AtlasTexels
 from invrender.scene.cubemap import cube_texel_solid_angles
 from invrender.scene.types import ATLAS_MAPS, Maps, Mesh
@@ -186,3 +186,16 @@ def test_a_texel_on_an_edge_shared_with_another_material_reads_its_own_side():
     assert correspond(texels, mesh, kd.shape[:2]).truth_values(kd).tolist() == [[1, 0, 0]]  # a tie: lowest id
     own = correspond(texels, mesh, kd.shape[:2], recovered_mesh=mesh)
     assert own.truth_values(kd).tolist() == [[0, 0, 1]] and own.distance.tolist() == [0.0]
+
+
+def test_the_sky_outside_the_suns_disc_is_scored_without_the_sun():
+    """A uniform sky of 1 with a sun of 150 in one texel: a recovery that misses the sun but has
+    the sky right scores 0 outside the disc (and far from 0 with it); 1.2 everywhere else, 0.04."""
+    n = 8
+    truth = np.ones((6, n, n, 3))
+    truth[2, 3, 4] = 150.0
+    missed_sun = np.ones_like(truth)
+    assert kg_mse(missed_sun, truth) > 1.0
+    assert kg_mse_outside_sun(missed_sun, truth) == pytest.approx(0.0)
+    assert kg_mse_outside_sun(np.full_like(truth, 1.2), truth) == pytest.approx(0.04)
+    assert kg_mse_outside_sun(np.zeros_like(truth), np.zeros_like(truth)) == 0.0  # no sky, no sun

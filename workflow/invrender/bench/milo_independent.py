@@ -58,6 +58,7 @@ METRICS = (
     ("kd MSE", ("maps", "map_mse", "kd"), ".4f"),
     ("light maps MSE (x/(1+x))", ("maps", "light_maps_mse"), ".4f"),
     ("light maps MSE, linear", ("maps", "light_maps_mse_linear"), ".3g"),
+    ("the same, kg outside the sun's disc", ("maps", "light_maps_mse_linear_outside_sun"), ".3g"),
     ("emitted power, recovered / true", ("maps", "emitted_power_ratio"), ".2f"),
     ("novel-view PSNR [dB]", ("novel_views", "mean", "psnr_db"), ".2f"),
 )

@@ -7,7 +7,8 @@
   one by nearest-texel lookup of the finer texel's centre direction, the renderer's lookup, which
   is exact when one size divides the other), each texel weighted by its solid angle, so the MSE
   is a mean over the sphere of directions, not over the cube's unevenly sized texels.
-- Light maps MSE (the paper's 0.002): the mean of the ke, kw and kg MSEs.
+- Light maps MSE (the paper's 0.002): the mean of the ke, kw and kg MSEs; in linear units also
+  with kg outside the sun's disc (``kg_mse_outside_sun``).
 - Material MSE (the paper's 0.015): shading balls (``balls.py``) of (kd, ks, ka), over at most
   ``max_ball_texels`` covered texels taken at an even stride (all of them if fewer).
 """
@@ -45,6 +46,23 @@ def kg_mse(recovered, truth) -> float:
     return mse(a, b, weights)
 
 
+SUN_FACTOR = 10.0  # a truth sky texel this many times brighter than the sky's median is the sun's
+
+
+def kg_mse_outside_sun(recovered, truth) -> float:
+    """kg's MSE over the directions outside the sun's disc: the truth's texels at most SUN_FACTOR
+    times its median luminance (solid-angle weighted). In linear units the sun's few texels
+    outweigh the rest of the sky; this is the sky's error without them (all of it when the truth
+    has no sun)."""
+    a, b, weights = kg_on_common_cube(recovered, truth)
+    luminance = b.mean(-1)
+    order = np.argsort(luminance, axis=None)
+    cumulative = np.cumsum(weights.reshape(-1)[order])
+    median = luminance.reshape(-1)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]
+    outside = luminance <= SUN_FACTOR * median
+    return mse(a[outside], b[outside], weights[outside]) if outside.any() else 0.0
+
+
 def compress(radiance):
     """x / (1 + x): radiance on [0, 1), as the material maps are. The light maps' MSE is taken on
     this scale: in linear units one sun texel of radiance 150 outweighs the rest of the scene
@@ -77,6 +95,11 @@ def map_errors(
     subset = ball_subset(len(rec["kd"]), max_ball_texels)
     errors = _errors(rec, recovered_maps.kg, true, truth_maps.kg, subset)
     errors["emitted_power_ratio"] = emitted_power_ratio(rec["ke"], true["ke"])
+    outside = kg_mse_outside_sun(recovered_maps.kg, truth_maps.kg)
+    errors["kg_mse_outside_sun"] = outside
+    errors["light_maps_mse_linear_outside_sun"] = float(
+        np.mean([errors["map_mse"]["ke"], errors["map_mse"]["kw"], outside])
+    )
     errors["shading_balls"] = {
         "texels": int(len(subset)),
         "of_texels": int(len(rec["kd"])),
