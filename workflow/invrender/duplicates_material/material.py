@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..render.losses import energy_excess
+from ..render.losses import energy_excess, log_sky_variation
 from ..scene.types import ATLAS_MAPS, Atlas, Maps
 
 F0 = 0.04  # a dielectric's reflectance at normal incidence (the paper's 0.02; MILO's default ks 0.04)
@@ -139,7 +139,9 @@ class TexelMaterial(torch.nn.Module):
     def regularisers(self, settings: dict) -> dict[str, torch.Tensor]:
         """The weighted regularisers (config.py says why each is there), summed over the sets."""
         terms = {key: torch.zeros(()) for key in ("smoothness", "binary", "sparsity", "energy")}
-        terms["sky_smoothness"] = settings["sky_smoothness"] * self._sky_variation()
+        terms["sky_smoothness"] = settings["sky_smoothness"] * log_sky_variation(
+            self.sky, self.sky_pairs, SKY_LOG_LIMIT
+        )
         for name in self.names:
             m = self.maps(name)
             s = m["s"]
@@ -152,12 +154,3 @@ class TexelMaterial(torch.nn.Module):
                 difference = (values[pairs[:, 0]] - values[pairs[:, 1]]).abs().sum(-1).mean()
                 terms["smoothness"] = terms["smoothness"] + settings["smoothness"] * difference
         return terms
-
-    def _sky_variation(self) -> torch.Tensor:
-        """Mean |log kg_i - log kg_j| over neighbouring sky texels, RGB summed: L1 in log radiance,
-        so a horizon or a sun stays sharp while the directions no copy reflects take their
-        neighbours' values instead of whatever fits the noise."""
-        if not len(self.sky_pairs):
-            return torch.zeros(())
-        g = torch.clamp(self.sky, max=SKY_LOG_LIMIT).reshape(-1, 3)
-        return (g[self.sky_pairs[:, 0]] - g[self.sky_pairs[:, 1]]).abs().sum(-1).mean()

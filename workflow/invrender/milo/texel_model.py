@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from ..render.adjoint import ATLAS_CHANNELS, GRAD_CHANNELS
+from ..render.losses import log_sky_variation
 from ..scene.neighbours import point_neighbour_pairs, sky_neighbour_pairs
 from .network import EMITTER_KA, RANGES, SKY_LOG_LIMIT
 
@@ -77,30 +78,35 @@ class TexelMaps(nn.Module):
     def optimisers(self, settings: dict) -> list:
         return [torch.optim.Adam(self.parameters(), lr=settings["lr_texels"])]
 
-    def _all_maps(self) -> torch.Tensor:
-        reflecting = 1.0 - self.emitter
+    def _maps(self, rows=None) -> torch.Tensor:
+        """The 11-channel maps of the texels `rows` (None: every texel)."""
+        at = slice(None) if rows is None else torch.as_tensor(rows)
+        emitter = self.emitter[at]
+        reflecting = 1.0 - emitter
         low_ka, high_ka = RANGES["ka"]
-        kd, ks, ka_unit = self._reflectance()
-        ka = low_ka + (high_ka - low_ka) * ka_unit
+        kd, ks, ka_unit = self._reflectance(at)
         columns = {
             "kd": kd * reflecting,
             "ks": ks.expand(-1, 3) * reflecting,
-            "ka": ka * reflecting + EMITTER_KA * self.emitter,
-            "ke": torch.exp(torch.clamp(self.ke_log, max=SKY_LOG_LIMIT)) * self.emitter,
-            "kw": torch.zeros_like(self.emitter),
+            "ka": (low_ka + (high_ka - low_ka) * ka_unit) * reflecting + EMITTER_KA * emitter,
+            "ke": self._emission(at),
+            "kw": torch.zeros_like(emitter),
         }
         maps = torch.cat([columns[name] for name in GRAD_CHANNELS], -1)
         assert maps.shape[1] == ATLAS_CHANNELS
         return maps
 
-    def _reflectance(self):
-        """kd (n, 3), the grey ks (n, 1) and ka on [0, 1] (n, 1) of every texel; kd is a share of
-        what ks leaves, so that no texel reflects more light than it receives (kd + ks <= 1)."""
-        ks = torch.sigmoid(self.ks_logit)
-        return torch.sigmoid(self.kd_logit) * (1.0 - ks), ks, torch.sigmoid(self.ka_logit)
+    def _reflectance(self, at=slice(None)):
+        """kd (n, 3), the grey ks (n, 1) and ka on [0, 1] (n, 1) of the texels `at`; kd is a share
+        of what ks leaves, so that no texel reflects more light than it receives."""
+        ks = torch.sigmoid(self.ks_logit[at])
+        return torch.sigmoid(self.kd_logit[at]) * (1.0 - ks), ks, torch.sigmoid(self.ka_logit[at])
+
+    def _emission(self, at=slice(None)):
+        return torch.exp(torch.clamp(self.ke_log[at], max=SKY_LOG_LIMIT)) * self.emitter[at]
 
     def texel_surface(self, texels, rows) -> dict[str, torch.Tensor]:
-        maps = self._all_maps() if rows is None else self._all_maps()[torch.as_tensor(rows)]
+        maps = self._maps(rows)
         return {"maps": maps, "raw": maps}
 
     def sky(self, directions: torch.Tensor) -> torch.Tensor:
@@ -114,13 +120,11 @@ class TexelMaps(nn.Module):
         terms = {"specular": settings["specular_prior"] * ((ks - F0).abs() * reflecting).mean()}
         if len(self.pairs):
             i, j = self.pairs[:, 0], self.pairs[:, 1]
-            ke = torch.log1p(self._all_maps()[:, GRAD_CHANNELS["ke"]])  # emitters: relative differences
+            ke = torch.log1p(self._emission())  # emitters: relative differences
             values = torch.cat([kd, ks, ka, ke], -1)
             same_kind = (self.emitter[i] == self.emitter[j]).float()[:, 0]
             difference = (values[i] - values[j]).abs().sum(-1) * same_kind
             terms["smoothness"] = settings["smoothness"] * difference.mean()
-        if len(self.sky_pairs):
-            g = torch.clamp(self.sky_log, max=SKY_LOG_LIMIT)
-            sky_terms = (g[self.sky_pairs[:, 0]] - g[self.sky_pairs[:, 1]]).abs().sum(-1).mean()
-            terms["sky_smoothness"] = settings["sky_smoothness"] * sky_terms
+        sky_terms = log_sky_variation(self.sky_log, self.sky_pairs, SKY_LOG_LIMIT)
+        terms["sky_smoothness"] = settings["sky_smoothness"] * sky_terms
         return terms

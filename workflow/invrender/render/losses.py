@@ -47,3 +47,16 @@ def energy_excess(kd, ks):
     import torch
 
     return torch.relu(kd + ks - 1.0).square()
+
+
+def log_sky_variation(log_sky, pairs, limit: float):
+    """Mean |log kg_i - log kg_j| over neighbouring sky texels `pairs` ((m, 2) indices into the
+    (texels, 3) `log_sky`, clamped below `limit`), RGB summed: L1 in log radiance, so a horizon or
+    a sun stays sharp while directions nothing constrains take their neighbours' values instead
+    of whatever fits the noise. Zero without pairs (torch tensors)."""
+    import torch
+
+    if not len(pairs):
+        return torch.zeros(())
+    g = torch.clamp(log_sky, max=limit).reshape(-1, 3)
+    return (g[pairs[:, 0]] - g[pairs[:, 1]]).abs().sum(-1).mean()
