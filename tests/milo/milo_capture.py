@@ -8,6 +8,18 @@ from pathlib import Path
 import yaml
 
 from invrender.cli import main
+from invrender.milo.importance import emitting_start, observed_radiance
+from invrender.milo.network import MiloNet
+from invrender.milo.stage import capture_scale, training_features
+from invrender.milo.texel_model import TexelMaps
+from invrender.milo.texels import Texels
+from invrender.milo.train import Training, Views
+from invrender.render.renderer import Renderer
+from invrender.scene.atlas import AtlasTexels
+from invrender.scene.cameras import read_cameras
+from invrender.scene.capture import read_view
+from invrender.scene.mesh_io import read_mesh
+from invrender.scene.types import Maps, Scene
 
 TINY_ROOM = {"atlas_resolution": 64, "cameras": {"count": 3, "width": 32, "height": 24}}
 # A few iterations of a small network: seconds per run.
@@ -46,3 +58,24 @@ def _json(value) -> str:
     import json
 
     return json.dumps(value)
+
+
+def training_on(root: Path, settings: dict):
+    """A Training of the model `settings` name on the capture at `root`, warm-started as the
+    stage does (the lamps start emitting)."""
+    atlas = AtlasTexels.load(root / "geometry" / "atlas.npz")
+    cameras = read_cameras(root / "cameras")
+    images = [read_view(root / "cameras" / "images", c) for c in cameras]
+    scene = Scene(
+        read_mesh(root / "geometry" / "mesh.ply"),
+        Maps.uniform(size=atlas.shape, cube=settings["sky_resolution"]),
+        cameras,
+    )
+    renderer = Renderer(scene, training_features(settings))
+    texels = Texels.from_atlas(atlas)
+    model = MiloNet(settings, 5.0, 0.5) if settings["model"] == "network" else TexelMaps(settings, texels, 0.5)
+    training = Training(settings, model, texels, renderer, Views.from_images(cameras, images))
+    radiance, seen = observed_radiance(atlas, renderer, cameras, images)
+    emitting = emitting_start(radiance, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
+    model.warm_start(texels, emitting, radiance, seen, settings)
+    return training

@@ -9,47 +9,17 @@ import time
 import numpy as np
 import pytest
 import torch
-from milo_capture import TINY, milo_args
+from milo_capture import TINY, milo_args, training_on
 
 from invrender.cli import main
 from invrender.milo import checkpoint
 from invrender.milo.config import resolve
-from invrender.milo.importance import emitting_start, observed_radiance
-from invrender.milo.network import MiloNet
-from invrender.milo.stage import capture_scale, training_features
-from invrender.milo.texel_model import TexelMaps
-from invrender.milo.texels import Texels
-from invrender.milo.train import Training, Views, iteration_seed
+from invrender.milo.train import iteration_seed
 from invrender.render.adjoint import GRAD_CHANNELS
 from invrender.render.batches import ray_batch
-from invrender.render.renderer import Renderer
 from invrender.render.torch_ops import render_rays
-from invrender.scene.atlas import AtlasTexels
 from invrender.scene.cameras import read_cameras, write_colmap
-from invrender.scene.capture import read_view
 from invrender.scene.images import read_image, write_exr
-from invrender.scene.mesh_io import read_mesh
-from invrender.scene.types import Maps, Scene
-
-
-def _training(root, settings):
-    atlas = AtlasTexels.load(root / "geometry" / "atlas.npz")
-    cameras = read_cameras(root / "cameras")
-    images = [read_view(root / "cameras" / "images", c) for c in cameras]
-    scene = Scene(
-        read_mesh(root / "geometry" / "mesh.ply"),
-        Maps.uniform(size=atlas.shape, cube=settings["sky_resolution"]),
-        cameras,
-    )
-    renderer = Renderer(scene, training_features(settings))
-    texels = Texels.from_atlas(atlas)
-    model = MiloNet(settings, 5.0, 0.5) if settings["model"] == "network" else TexelMaps(settings, texels, 0.5)
-    training = Training(settings, model, texels, renderer, Views.from_images(cameras, images))
-    radiance, seen = observed_radiance(atlas, renderer, cameras, images)  # the lamps start emitting
-    emitting = emitting_start(radiance, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
-    model.warm_start(texels, emitting, radiance, seen, settings)
-    return training
-
 
 NO_PRIORS = {"beta": 0.0, "theta": 0.0, "zeta": 0.0, "l2": 0.0, "smoothness": 0.0, "sky_smoothness": 0.0}
 NO_STEPS = {"lr_mlp": 0.0, "lr_template": 0.0, "lr_texels": 0.0}
@@ -61,7 +31,7 @@ def test_sparse_chain_rule_equals_autograd_through_the_renderer(tiny_capture, mo
     the reference scatters the model's maps over the whole atlas and back-propagates through
     RenderRays (render/torch_ops.py), the same forward and backward samples."""
     settings = resolve("demo", {**TINY, **NO_PRIORS, **NO_STEPS, "specular_prior": 0.0, "model": model})
-    training = _training(tiny_capture, settings)
+    training = training_on(tiny_capture, settings)
     training.step()
     ours = [p.grad.clone() for p in training.net.parameters()]
 

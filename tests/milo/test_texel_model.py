@@ -76,5 +76,6 @@ def test_no_texel_reflects_more_than_it_receives_whatever_the_parameters():
 def test_the_texels_preset_and_its_refusals():
     settings = resolve("texels")
     assert settings["model"] == "texels" and settings["iterations"] == 40 and settings["rays"] == 8192
+    assert settings["reflectance_passes"] == 4 and settings["max_bounces"] == 10
     with pytest.raises(SceneError, match="model: expected one of network, texels"):
         resolve("demo", {"model": "voxels"})

@@ -11,8 +11,8 @@ Per capture, the same evaluate stage scores every arm on the surface against the
 
 - each recovery arm: MILO-Net with the config's preset (`cpu` in config/benchmark.yaml), the
   `texels` preset (the maps optimised texel by texel);
-- the per-texel guess: the `texels` model's start (each texel's observed radiance times one
-  global factor, no light transport), scored as it is;
+- the per-texel guess: the `texels` model's start before its light-transport passes (each
+  texel's observed radiance times one global factor), scored as it is;
 - the constant guess: each map the truth's mean over the surface (evaluate's `constant_guess`);
 - the floor: the truth resampled onto the recovered atlas (its maps errors are the resampling's,
   its novel views what a perfect recovery renders at this spp).
@@ -51,7 +51,8 @@ SPLITS = {
     },
 }
 RECOVERIES = {"MILO-Net": None, "texels": ("texels", {})}  # None: the config's preset and overrides
-GUESS = ("texels", {"iterations": 1, "lr_texels": 0.0})  # the texels model's start, unchanged
+# the texels model's start without light transport, unchanged
+GUESS = ("texels", {"iterations": 1, "lr_texels": 0.0, "reflectance_passes": 0})
 QUICK_ITERATIONS = 2
 METRICS = (
     ("material MSE", ("maps", "material_mse"), ".4f"),

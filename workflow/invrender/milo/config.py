@@ -24,6 +24,9 @@ _COMMON = {
     "smoothness_radius": 1.5,  # texels: neighbours within this many texel spacings in 3D
     "sky_smoothness": 0.01,  # texels: L1 in log radiance between neighbouring sky texels
     "specular_prior": 0.01,  # texels: L1 of ks from a dielectric's 0.04
+    "reflectance_passes": 4,  # texels: kd corrected by captured / rendered radiance first (reflectance.py)
+    "reflectance_spp": 64,  # texels: samples per pixel of those renders
+    "reflectance_radius": 3.0,  # texels: the correction averaged within this many texel spacings
     "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)
@@ -98,13 +101,14 @@ PRESETS = {
         "snapshot_every": 50,
     },
 }
-# The atlas maps optimised texel by texel from the per-texel guess (texel_model.py): at the demo's
-# budget it scores better than MILO-Net on both measured rooms, and longer runs do not help
-# (docs/milo.md, "The texels model").
+# The atlas maps optimised texel by texel (texel_model.py) from the per-texel guess corrected by
+# light transport (reflectance.py): it scores better than MILO-Net on every measured room in a
+# fraction of its time (docs/milo.md, "The texels model").
 PRESETS["texels"] = {
     **PRESETS["demo"],
     "model": "texels",
     "iterations": 40,
+    "max_bounces": 10,  # the capture's light after 3 bounces is missing from a closed pale room (docs/milo.md)
     "snapshot_every": 10,
     "checkpoint_every": 20,
 }
@@ -136,6 +140,9 @@ def _check(s: dict, where: str) -> None:
     for key in positive:
         if s[key] < 1:
             raise SceneError(where, key, f"a positive integer, got {s[key]!r}")
+    for key, low in (("reflectance_passes", 0), ("reflectance_spp", 1), ("reflectance_radius", 0)):
+        if s[key] < low:
+            raise SceneError(where, key, f"a number >= {low}, got {s[key]!r}")
     if s["model"] not in MODELS:
         raise SceneError(where, "model", f"one of {', '.join(MODELS)}, got {s['model']!r}")
     if s["template"] and not 0 <= s["emitters"] <= s["materials"] - 2:

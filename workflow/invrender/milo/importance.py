@@ -10,6 +10,8 @@ material settles as a dim glow over everything (measured in docs/milo.md).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..render.renderer import Renderer, pixel_requests
@@ -21,32 +23,54 @@ from ..scene.types import Camera
 DEPTH_TOLERANCE = 0.01  # a texel is seen when it lies within 1 % of the depth the camera sees
 
 
+@dataclass
+class TexelPixels:
+    """Which pixel of which view sees each covered texel (nearest pixel, occlusion by the
+    rendered depth): computed once, it projects any set of images of those views onto the atlas."""
+
+    atlas: AtlasTexels
+    rows: np.ndarray  # the covered texels' atlas rows and columns
+    cols: np.ndarray
+    seen: list[tuple[np.ndarray, np.ndarray]]  # per view: (texel index, flat pixel index)
+
+    @classmethod
+    def build(cls, atlas: AtlasTexels, renderer: Renderer, cameras: list[Camera]) -> TexelPixels:
+        rows, cols = np.nonzero(atlas.mask)
+        points = atlas.position[rows, cols].astype(np.float64)
+        seen = []
+        for index, camera in enumerate(cameras):
+            aovs = renderer.aovs(cameras, pixel_requests(camera, index))
+            depth = aovs["depth"].reshape(camera.height, camera.width)
+            pixels = project_points(camera, points)
+            inside = np.all(np.isfinite(pixels), axis=1)
+            inside[inside] &= (pixels[inside] >= 0).all(1) & (pixels[inside, 0] < camera.width)
+            inside[inside] &= pixels[inside, 1] < camera.height
+            x = np.floor(pixels[inside, 0]).astype(int)
+            y = np.floor(pixels[inside, 1]).astype(int)
+            z = (points[inside] @ np.asarray(camera.R).T + camera.t)[:, 2]
+            keep = z <= depth[y, x] * (1 + DEPTH_TOLERANCE) + 1e-4  # not behind what the camera sees
+            seen.append((np.flatnonzero(inside)[keep], y[keep] * camera.width + x[keep]))
+        return cls(atlas, rows, cols, seen)
+
+    def project(self, images) -> tuple[np.ndarray, np.ndarray]:
+        """(radiance (H, W, 3), views (H, W)): each texel's mean over the views that see it of
+        `images` (one (height, width, 3) array per view), and how many views see it."""
+        total = np.zeros((len(self.rows), 3))
+        count = np.zeros(len(self.rows))
+        for (texels, pixels), image in zip(self.seen, images):
+            total[texels] += np.asarray(image).reshape(-1, 3)[pixels]
+            count[texels] += 1
+        radiance = np.zeros((*self.atlas.shape, 3), np.float32)
+        views = np.zeros(self.atlas.shape, np.int32)
+        radiance[self.rows, self.cols] = total / np.maximum(count, 1)[:, None]
+        views[self.rows, self.cols] = count
+        return radiance, views
+
+
 def observed_radiance(atlas: AtlasTexels, renderer: Renderer, cameras: list[Camera], images) -> tuple:
     """(radiance (H, W, 3), views (H, W)): each texel's mean captured radiance over the views that
     see it (nearest pixel; occlusion by the rendered depth), and how many views see it."""
-    h, w = atlas.shape
-    rows, cols = np.nonzero(atlas.mask)
-    points = atlas.position[rows, cols].astype(np.float64)
-    total = np.zeros((len(rows), 3))
-    count = np.zeros(len(rows))
-    for index, (camera, image) in enumerate(zip(cameras, images)):
-        depth = renderer.aovs(cameras, pixel_requests(camera, index))["depth"].reshape(camera.height, camera.width)
-        pixels = project_points(camera, points)
-        inside = np.all(np.isfinite(pixels), axis=1)
-        inside[inside] &= (pixels[inside] >= 0).all(1) & (pixels[inside, 0] < camera.width)
-        inside[inside] &= pixels[inside, 1] < camera.height
-        x = np.floor(pixels[inside, 0]).astype(int)
-        y = np.floor(pixels[inside, 1]).astype(int)
-        z = (points[inside] @ np.asarray(camera.R).T + camera.t)[:, 2]
-        keep = z <= depth[y, x] * (1 + DEPTH_TOLERANCE) + 1e-4  # not behind what the camera sees
-        seen = np.flatnonzero(inside)[keep]
-        total[seen] += image[y[keep], x[keep]]
-        count[seen] += 1
-    radiance = np.zeros((h, w, 3), np.float32)
-    views = np.zeros((h, w), np.int32)
-    radiance[rows, cols] = total / np.maximum(count, 1)[:, None]
-    views[rows, cols] = count
-    return radiance, views
+    return TexelPixels.build(atlas, renderer, cameras).project(images)
 
 
 def emitting_start(radiance: np.ndarray, views: np.ndarray, emission: float, fraction: float) -> np.ndarray:

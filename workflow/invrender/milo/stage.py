@@ -36,8 +36,9 @@ from ..scene.training_log import TrainingLog
 from ..scene.types import Camera, Maps, Scene, SceneError
 from . import checkpoint
 from .config import resolve, settings_hash
-from .importance import emitting_start, observed_radiance
+from .importance import TexelPixels, emitting_start
 from .network import MiloNet
+from .reflectance import refine_reflectance
 from .texel_model import TexelMaps
 from .texels import Texels
 from .train import LOG_COLUMNS, Training, Views
@@ -121,7 +122,8 @@ def run(
     texels = Texels.from_atlas(atlas)
     model = MiloNet(settings, emission, sky) if settings["model"] == "network" else TexelMaps(settings, texels, sky)
     training = Training(settings, model, texels, renderer, views, settings["loss_epsilon"] * sky)
-    radiance, seen = observed_radiance(atlas, renderer, train_cams, images)
+    pixels = TexelPixels.build(atlas, renderer, train_cams)
+    radiance, seen = pixels.project(images)
     if settings["texture_importance"]:  # section 3.5's texture importance sampling
         renderer.importance = radiance @ LUMINANCE.astype(np.float32)
     emitting = emitting_start(radiance, seen, emission, settings["warm_start_fraction"])
@@ -130,6 +132,8 @@ def run(
     state = checkpoint.resume(out / "checkpoints", resume, settings, digests)
     if state is not None:
         training.restore(state)
+    elif settings["model"] == "texels" and settings["reflectance_passes"]:
+        refine_reflectance(training, pixels, radiance, emitting)
     log.info(
         "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views; from %d",
         preset,

@@ -11,7 +11,8 @@ roughness ka, and no emission; kd is a share of 1 - ks, so kd + ks <= 1 holds by
 The sky is kg = exp(g) per cube texel. Priors: an L1 difference between texels that are
 neighbours on the surface (a wall is one colour unless the photographs say otherwise, and texels
 few rays reach follow their neighbours), the same in log radiance over the sky, and a pull of ks
-towards a dielectric's 0.04.
+towards a dielectric's 0.04. Before the gradient steps, reflectance.py corrects kd by light
+transport (captured over rendered radiance, texel by texel).
 """
 
 from __future__ import annotations
@@ -74,6 +75,12 @@ class TexelMaps(nn.Module):
         self.emitter.copy_(torch.from_numpy(emitting.astype(np.float32))[:, None])
         self.kd_logit.copy_(_logit(reflectance_start(radiance, seen, emitting) / (1.0 - F0)))
         self.ke_log.copy_(torch.from_numpy(np.log(np.maximum(radiance, 1e-3)).astype(np.float32)))
+
+    @torch.no_grad()
+    def scale_reflectance(self, ratio: np.ndarray) -> None:
+        """Every reflecting texel's kd times `ratio` (n, 3), kept inside (0, 1 - ks)."""
+        share = torch.sigmoid(self.kd_logit) * torch.from_numpy(np.asarray(ratio, np.float32))
+        self.kd_logit.copy_(torch.where(self.emitter > 0, self.kd_logit, _logit(share.numpy())))
 
     def optimisers(self, settings: dict) -> list:
         return [torch.optim.Adam(self.parameters(), lr=settings["lr_texels"])]
