@@ -61,6 +61,7 @@ METRICS = (
     ("light maps MSE, linear", ("maps", "light_maps_mse_linear"), ".3g"),
     ("the same, kg outside the sun's disc", ("maps", "light_maps_mse_linear_outside_sun"), ".3g"),
     ("emitted power, recovered / true", ("maps", "emitted_power_ratio"), ".2f"),
+    ("worst lamp's power, abs(recovered / true - 1)", ("maps", "emitters", "worst_ratio_error"), ".2f"),
     ("novel-view PSNR [dB]", ("novel_views", "mean", "psnr_db"), ".2f"),
 )
 

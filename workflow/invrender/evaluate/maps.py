@@ -21,6 +21,7 @@ from ..scene.cubemap import as_cube, cube_texel_solid_angles, lookup_cube, texel
 from ..scene.types import ATLAS_MAPS
 from .balls import BALL_LIGHTS, BALL_SIZE, ball_errors
 from .correspond import Correspondence
+from .emitters import emitted_power_ratio, emitter_powers
 from .metrics import mse
 
 __all__ = ["kg_on_common_cube", "kg_mse", "map_errors", "truth_in_recovered_layout", "DEFAULT_BALL_TEXELS"]
@@ -95,6 +96,7 @@ def map_errors(
     subset = ball_subset(len(rec["kd"]), max_ball_texels)
     errors = _errors(rec, recovered_maps.kg, true, truth_maps.kg, subset)
     errors["emitted_power_ratio"] = emitted_power_ratio(rec["ke"], true["ke"])
+    errors["emitters"] = emitter_powers(rec["ke"], true["ke"], corr.point)
     outside = kg_mse_outside_sun(recovered_maps.kg, truth_maps.kg)
     errors["kg_mse_outside_sun"] = outside
     errors["light_maps_mse_linear_outside_sun"] = float(
@@ -112,13 +114,6 @@ def map_errors(
     constant = {name: np.broadcast_to(values.mean(axis=0), values.shape) for name, values in true.items()}
     guess = _errors(constant, _constant_sky(truth_maps.kg), true, truth_maps.kg, subset)
     return errors | {"constant_guess": {key: guess[key] for key in ("light_maps_mse", "material_mse", "map_mse")}}
-
-
-def emitted_power_ratio(recovered_ke, true_ke) -> float | None:
-    """The surface's emission, recovered over true (summed over the corresponded texels, which
-    sample the surface evenly, and the RGB channels); None where the truth emits nothing."""
-    true_total = float(np.sum(true_ke))
-    return float(np.sum(recovered_ke)) / true_total if true_total > 0 else None
 
 
 def _constant_sky(kg) -> np.ndarray:
