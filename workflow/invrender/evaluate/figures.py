@@ -138,6 +138,15 @@ def _ticks(lo: float, hi: float, log: bool) -> list[float]:
     return list(np.arange(np.ceil(lo / step) * step, hi + 1e-9, step))
 
 
+def _tick_label(t: float, lo: float, hi: float, log: bool) -> str:
+    """A tick's text with as many decimals as the ticks' spacing needs (22.35 and 22.40 apart)."""
+    if log:
+        return f"{t:.3g}"
+    ticks = _ticks(lo, hi, False)
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else max(abs(t), 1.0)
+    return f"{t:.{max(0, int(-np.floor(np.log10(step) + 1e-9)))}f}"
+
+
 def _panel(title: str, x, series: dict, ylabel: str, log: bool, targets: dict) -> np.ndarray:
     """One plot: each series (label -> y values over x), dashed horizontal target lines."""
     img = np.full((PLOT_H, PLOT_W, 3), 255, np.uint8)
@@ -160,10 +169,10 @@ def _panel(title: str, x, series: dict, ylabel: str, log: bool, targets: dict) -
     for t in _ticks(ylo, yhi, log):
         if ylo <= tf(t) <= yhi:
             cv2.line(img, (left - 4, py(t)), (left, py(t)), BLACK, 1)
-            cv2.putText(img, f"{t:.3g}", (4, py(t) + 4), FONT, 0.35, BLACK, 1, cv2.LINE_AA)
+            cv2.putText(img, _tick_label(t, ylo, yhi, log), (4, py(t) + 4), FONT, 0.35, BLACK, 1, cv2.LINE_AA)
     for t in _ticks(xlo, xhi, False):
         cv2.line(img, (px(t), bottom), (px(t), bottom + 4), BLACK, 1)
-        cv2.putText(img, f"{t:.3g}", (px(t) - 10, bottom + 16), FONT, 0.35, BLACK, 1, cv2.LINE_AA)
+        cv2.putText(img, _tick_label(t, xlo, xhi, False), (px(t) - 10, bottom + 16), FONT, 0.35, BLACK, 1, cv2.LINE_AA)
     cv2.putText(img, title, (left, 20), FONT, 0.5, BLACK, 1, cv2.LINE_AA)
     cv2.putText(img, "training time (minutes)", (left + 150, PLOT_H - 10), FONT, 0.4, BLACK, 1, cv2.LINE_AA)
     cv2.putText(img, ylabel, (left + 5, top + 14), FONT, 0.35, GREY, 1, cv2.LINE_AA)
