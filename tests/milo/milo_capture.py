@@ -8,7 +8,7 @@ from pathlib import Path
 import yaml
 
 from invrender.cli import main
-from invrender.milo.importance import emitting_start, observed_radiance
+from invrender.milo.importance import TexelPixels, emitting_start
 from invrender.milo.network import MiloNet
 from invrender.milo.stage import capture_scale, training_features
 from invrender.milo.texel_model import TexelMaps
@@ -75,7 +75,7 @@ def training_on(root: Path, settings: dict):
     texels = Texels.from_atlas(atlas)
     model = MiloNet(settings, 5.0, 0.5) if settings["model"] == "network" else TexelMaps(settings, texels, 0.5)
     training = Training(settings, model, texels, renderer, Views.from_images(cameras, images))
-    radiance, seen = observed_radiance(atlas, renderer, cameras, images)
+    radiance, seen = TexelPixels.build(atlas, renderer, cameras).project(images)
     emitting = emitting_start(radiance, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
     model.warm_start(texels, emitting, radiance, seen, settings)
     return training

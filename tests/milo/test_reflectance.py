@@ -11,6 +11,7 @@ from invrender.milo.importance import TexelPixels, emitting_start
 from invrender.milo.reflectance import correction, refine_reflectance, smoothed_log
 from invrender.milo.stage import capture_scale
 from invrender.scene.atlas import AtlasTexels
+from invrender.scene.capture import read_view
 from invrender.scene.types import SceneError
 
 
@@ -50,9 +51,7 @@ def test_the_passes_bring_kd_closer_to_the_truth_than_the_per_texel_guess(tiny_c
     training = training_on(tiny_capture, settings)
     atlas = AtlasTexels.load(tiny_capture / "geometry" / "atlas.npz")
     pixels = TexelPixels.build(atlas, training.renderer, training.views.cameras)
-    images = [
-        training.views.pixels[o : o + c.width * c.height].reshape(c.height, c.width, 3) for o, c in _offsets(training)
-    ]
+    images = [read_view(tiny_capture / "cameras" / "images", c) for c in training.views.cameras]
     captured, seen = pixels.project(images)
     emitting = emitting_start(captured, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
     truth = truth_maps(tiny_capture)
@@ -62,13 +61,6 @@ def test_the_passes_bring_kd_closer_to_the_truth_than_the_per_texel_guess(tiny_c
     after = _relative_kd_error(training.predict().kd[judged], truth.kd[judged])
     assert len(moved) == settings["reflectance_passes"] and moved[-1] < moved[0]  # it converges
     assert after < 0.75 * before, (before, after)  # measured: 0.343 -> 0.221 (3 views of 32 x 24)
-
-
-def _offsets(training):
-    offset = 0
-    for camera in training.views.cameras:
-        yield offset, camera
-        offset += camera.width * camera.height
 
 
 def test_the_passes_settings_are_checked():

@@ -14,6 +14,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..scene.neighbours import point_spacing
+
 LINK_SPACINGS = 3.0  # truth emitting points this many texel spacings apart belong to one lamp
 NEAR_SPACINGS = 10.0  # recovered emission within this many texel spacings of a lamp is that lamp's
 EMITTING = 1e-3  # ke (summed over RGB) above which a point emits
@@ -24,13 +26,6 @@ def emitted_power_ratio(recovered_ke, true_ke) -> float | None:
     sample the surface evenly, and the RGB channels); None where the truth emits nothing."""
     true_total = float(np.sum(true_ke))
     return float(np.sum(recovered_ke)) / true_total if true_total > 0 else None
-
-
-def texel_spacing(points: np.ndarray) -> float:
-    """The median distance from a point to its nearest other point (not at the same place)."""
-    nearest = cKDTree(points).query(points, k=2)[0][:, 1]
-    apart = nearest[nearest > 0]
-    return float(np.median(apart)) if len(apart) else 0.0
 
 
 def lamp_labels(points: np.ndarray, emitting: np.ndarray, spacing: float) -> np.ndarray:
@@ -50,7 +45,7 @@ def emitter_powers(recovered_ke, true_ke, points) -> dict | None:
     surface evenly) and their ratio; the largest |ratio - 1| over the lamps, and the stray
     recovered emission's share of the truth's total. None where the truth emits nothing."""
     recovered, true = np.asarray(recovered_ke).sum(-1), np.asarray(true_ke).sum(-1)
-    spacing = texel_spacing(np.asarray(points))
+    spacing = point_spacing(points)
     labels = lamp_labels(points, true > EMITTING, spacing)
     if labels.max() < 0:
         return None

@@ -67,12 +67,6 @@ class TexelPixels:
         return radiance, views
 
 
-def observed_radiance(atlas: AtlasTexels, renderer: Renderer, cameras: list[Camera], images) -> tuple:
-    """(radiance (H, W, 3), views (H, W)): each texel's mean captured radiance over the views that
-    see it (nearest pixel; occlusion by the rendered depth), and how many views see it."""
-    return TexelPixels.build(atlas, renderer, cameras).project(images)
-
-
 def emitting_start(radiance: np.ndarray, views: np.ndarray, emission: float, fraction: float) -> np.ndarray:
     """(H, W) bool: texels seen brighter than `fraction` of the capture's brightest radiance."""
     return (views > 0) & ((radiance @ LUMINANCE.astype(np.float32)) > fraction * emission)

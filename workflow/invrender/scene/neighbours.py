@@ -13,16 +13,24 @@ from .cubemap import texel_directions
 SKY_NEIGHBOURS = 8  # each sky texel's neighbours in the sky prior: the 3 x 3 block around it
 
 
+def point_spacing(points: np.ndarray, tree: cKDTree | None = None) -> float:
+    """The median distance from a point to the nearest other point that is not at the same
+    place (0 for fewer than two points)."""
+    points = np.asarray(points, np.float64)
+    if len(points) < 2:
+        return 0.0
+    nearest = (tree or cKDTree(points)).query(points, k=2)[0][:, 1]
+    apart = nearest[nearest > 0]
+    return float(np.median(apart)) if len(apart) else 0.0
+
+
 def point_neighbour_pairs(points: np.ndarray, radius: float) -> np.ndarray:
-    """(m, 2) indices of points within `radius` spacings of each other (the spacing: the median
-    distance to the nearest other point that is not at the same place)."""
+    """(m, 2) indices of points within `radius` spacings (point_spacing) of each other."""
     points = np.asarray(points, np.float64)
     if len(points) < 2:
         return np.zeros((0, 2), np.int64)
     tree = cKDTree(points)
-    nearest = tree.query(points, k=2)[0][:, 1]
-    apart = nearest[nearest > 0]
-    spacing = float(np.median(apart)) if len(apart) else 0.0
+    spacing = point_spacing(points, tree)
     return tree.query_pairs(radius * max(spacing, 1e-12), output_type="ndarray").astype(np.int64)
 
 
