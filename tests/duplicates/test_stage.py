@@ -143,6 +143,47 @@ def test_hull_snap_moves_the_carved_hull_onto_the_points(monkeypatch):
     points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     kept, plain, none = stage._carve(None, {}, None, points, settings())
     snapped, report, _ = stage._carve(None, {}, None, points, settings(hull_snap=True))
-    assert kept is carved and plain == {"floor": None, "snap": None, "photo": None} and none.shape == (0, 3)
+    assert kept is carved and plain == {"floor": None, "snap": None, "photo": None, "set_aside": {}}
+    assert none.shape == (0, 3)
     radius = np.linalg.norm(snapped.positions, axis=1)
     assert np.abs(radius - 1.0).max() < 0.01 and report["snap"]["points"] == 2000
+
+
+def test_poses_name_each_copy_by_the_users_own_mask_too():
+    """poses.json: `instance_id` the segment's renumbered id, `mask_value` the value of the copy's
+    pixels in the user's id image (or `mask_file` in their folder of masks)."""
+    names = stage.mask_names([{"id": 1, "source": 10}, {"id": 2, "source": "cup.png"}, {"id": 3}])
+    doc = stage.poses_document({1: np.eye(4), 3: np.eye(4)}, names, np.eye(4), "note", "COLMAP")
+    got = [(e["instance_id"], e.get("mask_value"), e.get("mask_file"), e["registered"]) for e in doc["instances"]]
+    assert got == [(1, 10, None, True), (2, None, "cup.png", False), (3, 3, None, True)]
+
+
+def test_a_copy_given_a_wrong_pose_is_set_aside_and_the_hull_kept(monkeypatch):
+    """Strict carving (hull_outliers 0) of nine boxes, one of them posed over the floor between
+    three others, off its own silhouette: that copy alone carves every voxel away. The stage sets
+    it aside, carves the hull from the other eight (as large as the true poses' hull) and places
+    the eight, not the ninth."""
+    from posed_copies import box_scene, ids_for
+
+    from invrender.duplicates import hull, mapping
+
+    mesh, poses, K, _ = box_scene(9)
+    ids = ids_for(mesh, poses, K)
+    wrong = {i: T.copy() for i, T in poses.items()}
+    wrong[4][:3, 3] = np.linalg.inv(K) @ [230.0, 260.0, 1.0] * poses[4][2, 3]  # background there
+    bounds = hull.bounds_from_masks(ids, poses, K)
+    with pytest.raises(hull.EmptyHull):  # what stopped the stage before
+        hull.visual_hull(ids, wrong, K, bounds, resolution=48, k=0)
+
+    found = {(1, 2): (np.ones((8, 2)), np.ones((8, 2)))}
+    monkeypatch.setattr(stage, "match_all", lambda *args: (found, []))
+    registration = mapping.Registration(poses=wrong, unregistered=[], points=np.zeros((0, 3)), reconstruction=None)
+    monkeypatch.setattr(mapping, "register", lambda *args, **kwargs: registration)
+    photo = np.zeros((*ids.shape, 3), np.float32)
+    solved = stage.solve(photo, ids, K, {}, {}, None, settings(hull_outliers=0, hull_resolution=48), progress=False)
+
+    assert solved["shape"]["set_aside"].keys() == {4}
+    assert sorted(solved["poses"]) == [i for i in sorted(poses) if i != 4]
+    truth, _ = hull.visual_hull(ids, poses, K, bounds, resolution=48, k=0)
+    size = np.ptp(solved["mesh"].positions, axis=0)
+    np.testing.assert_allclose(size, np.ptp(truth.positions, axis=0), rtol=0.05)

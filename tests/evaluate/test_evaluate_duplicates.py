@@ -364,8 +364,8 @@ def tree(tmp_path_factory):
     positions = (np.asarray(can.positions, np.float64) - OFFSET) @ Q_TRUE / SCALE  # p' = Q^T (p - o) / s
     write_ply(dup_dir / "object.ply", Mesh(positions=positions.astype(np.float32), faces=can.faces, uvs=None))
     after = [
-        {"instance_id": 100 + t, "mask_value": r, "registered": t != 5, "T_obj2world": recovered_pose(poses[t])}
-        for t, r in renumber.items()  # its own numbering: the mask value names the pixels
+        {"instance_id": r, "mask_value": 100 + t, "registered": t != 5, "T_obj2world": recovered_pose(poses[t])}
+        for t, r in renumber.items()  # the segment's id names the pixels; mask_value is the user's own
     ]
     twists = dict(zip([1, 2, 3, 4], pairs_of((Y,), TWIST_DEG) * 2, strict=True))
     before = [

@@ -208,7 +208,20 @@ def reframe(T: np.ndarray, centre: np.ndarray, scale: float) -> np.ndarray:
     return out
 
 
-def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str) -> dict:
+def mask_names(entries: list[dict]) -> dict[int, dict]:
+    """Per segment id, what names its copy in the masks the user gave (instances.json's
+    ``source``): ``mask_value`` (its pixels' value in their id image) or ``mask_file`` (its file in
+    their folder); with masks the segment stage made, the value of its pixels in those."""
+    names = {}
+    for entry in entries:
+        source = entry.get("source", entry["id"])
+        names[int(entry["id"])] = {"mask_file": source} if isinstance(source, str) else {"mask_value": int(source)}
+    return names
+
+
+def poses_document(poses, names: dict[int, dict], world_from_cam, scale_note: str, source: str) -> dict:
+    """poses.json (scene/poses.py): ``instance_id`` is the segment's id (the pixels' value in
+    segmentation/masks), ``mask_value`` or ``mask_file`` the user's own name for the copy."""
     return {
         "convention": (
             "p_world = T_obj2world @ [p_obj, 1]; T_obj2world row-major 4x4; world = the photograph's "
@@ -219,11 +232,11 @@ def poses_document(poses, all_ids, world_from_cam, scale_note: str, source: str)
         "instances": [
             {
                 "instance_id": int(i),
-                "mask_value": int(i),
+                **named,
                 "registered": i in poses,
                 "T_obj2world": (world_from_cam @ poses[i] if i in poses else np.eye(4)).tolist(),
             }
-            for i in all_ids
+            for i, named in names.items()
         ],
     }
 
@@ -234,38 +247,75 @@ def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, 
     copies rest on (floor.py); with ``hull_snap``, moved onto the points (snap.py), and with
     ``hull_photo`` (and the photograph's ``gray``) moved again from the carved hull onto those and
     the points where the copies' pixels agree about the snapped one (photo.py). The second value
-    says what those did ({"floor": ..., "snap": ..., "photo": ...}, None where not done); the
-    third is the photo-consistent points (none without hull_photo)."""
+    says what those did ({"floor": ..., "snap": ..., "photo": ...}, None where not done) and which
+    copies were set aside because their poses left no voxel ({"set_aside": {id: hull coverage}});
+    the third is the photo-consistent points (none without hull_photo)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
-    carve = functools.partial(
-        hull.visual_hull, ids, poses, K, bounds, resolution=settings.hull_resolution, k=settings.hull_outliers,
-        target_faces=settings.hull_faces,
-    )  # fmt: skip
-    try:
-        mesh, _ = carve()
-    except hull.EmptyHull:
-        raise SceneError(
-            "duplicates",
-            "hull",
-            f"a visual hull inside the masks of the {len(poses)} posed copies; every voxel lies outside some "
-            f"copy's mask (hull_outliers {settings.hull_outliers}): their poses disagree (rough poses need "
-            "hull_outliers null, a tenth of the copies)",
-        ) from None
-    report = {"floor": None, "snap": None, "photo": None}
+
+    def carve(kept, k=settings.hull_outliers, plane=None):
+        floors = floor.floors_in_object_frame(plane, kept) if plane is not None else ()
+        return hull.visual_hull(ids, kept, K, bounds, resolution=settings.hull_resolution, k=k,
+                                target_faces=settings.hull_faces, floors=floors)  # fmt: skip
+
+    mesh, kept, set_aside = _agreeing_hull(carve, poses, ids, K, settings)
+    report = {"floor": None, "snap": None, "photo": None, "set_aside": set_aside}
     agreed = np.zeros((0, 3))
-    plane = floor.floor_plane(mesh, poses, IMAGE_UP, points) if settings.hull_floor else None
+    plane = floor.floor_plane(mesh, kept, IMAGE_UP, points) if settings.hull_floor else None
     if plane is not None:
-        mesh, _ = carve(floors=floor.floors_in_object_frame(plane, poses))
+        mesh, kept, more = _agreeing_hull(functools.partial(carve, plane=plane), kept, ids, K, settings)
+        set_aside.update(more)
         report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}
     if not settings.hull_snap:
         return mesh, report, agreed
     snapped, how = snap.snap_to_points(mesh, points)
     if settings.hull_photo and how is not None and gray is not None:
-        agreed, found = photo.consistent_points(snapped, poses, K, gray, ids)
+        agreed, found = photo.consistent_points(snapped, kept, K, gray, ids)
         report["photo"] = found.as_dict()
         snapped, how = snap.snap_to_points(mesh, np.vstack([points, agreed]))
     report["snap"] = None if how is None else how.as_dict()
     return snapped, report, agreed
+
+
+def _agreeing_hull(carve, poses: dict, ids, K, settings: Settings) -> tuple[Mesh, dict, dict[int, float]]:
+    """(mesh, the poses it was carved from, {set-aside id: its hull coverage}). One wrong pose can
+    carve every voxel away when no copy may disagree (``hull_outliers`` 0): then the loosest vote
+    that leaves a hull (one copy allowed to disagree, then two, ...) is drawn back at every copy,
+    the copy it covers worst is set aside, and the rest carved again, down to two copies."""
+    kept, set_aside = dict(poses), {}
+    while True:
+        try:
+            return carve(kept)[0], kept, set_aside
+        except hull.EmptyHull:
+            worst = _worst_covered(carve, kept, ids, K) if len(kept) > 2 else None
+        if worst is None:
+            raise SceneError(
+                "duplicates",
+                "hull",
+                f"a visual hull inside the masks of the {len(kept)} posed copies; every voxel lies outside some "
+                f"copy's mask (hull_outliers {settings.hull_outliers}): their poses disagree (rough poses need "
+                "hull_outliers null, a tenth of the copies)",
+            )
+        instance, covered = worst
+        log.warning(
+            "the posed copies leave no voxel of a hull: copy %d set aside (the hull of the others covers its mask "
+            "at IoU %.2f), carving again from %d copies", instance, covered, len(kept) - 1,
+        )  # fmt: skip
+        set_aside[instance] = covered
+        del kept[instance]
+
+
+def _worst_covered(carve, poses: dict, ids, K) -> tuple[int, float] | None:
+    """(id, coverage) of the copy that the loosest non-empty hull covers worst; None if no vote up
+    to half the copies leaves one."""
+    for k in range(1, len(poses) // 2 + 1):
+        try:
+            mesh, _ = carve(poses, k=k)
+        except hull.EmptyHull:
+            continue
+        coverage = refine.coverage(mesh, K, ids, poses)
+        instance = min(coverage, key=coverage.get)
+        return instance, float(coverage[instance])
+    return None
 
 
 def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress: bool = True) -> dict:
@@ -300,13 +350,16 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         timings["subpixel_s"] = time.perf_counter() - started - timings["match_and_map_s"]
     gray = adjust.gray_image(photo)
     mesh, shaped, agreed = _carve(ids, registration.poses, K, registration.points, settings, gray)
+    set_aside = shaped["set_aside"]
     tracked = {}
     if settings.photo_tracks and len(agreed) and registration.reconstruction is not None:
         began = time.perf_counter()
         tracked = _photo_tracks(gray, ids, K, registration, agreed, settings)
         timings["photo_tracks_s"] = time.perf_counter() - began
-        mesh, shaped, _ = _carve(ids, registration.poses, K, registration.points, settings, gray)
-    coverage = refine.coverage(mesh, K, ids, registration.poses)
+        mesh, shaped, _ = _carve(ids, _without(registration.poses, set_aside), K, registration.points, settings, gray)
+        set_aside = shaped["set_aside"] = {**set_aside, **shaped["set_aside"]}
+    trusted = _without(registration.poses, set_aside)
+    coverage = refine.coverage(mesh, K, ids, trusted)
     doubtful = sorted(i for i, c in coverage.items() if c < MIN_COVERAGE)
     if doubtful:
         log.warning(
@@ -320,9 +373,10 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
     registration.points = registration.points - centre
     registration.origin = centre
     mesh = Mesh((mesh.positions - centre).astype(np.float32), mesh.faces, uvs=None)
-    poses, rounds = dict(registration.poses), []
+    poses, rounds = _without(registration.poses, set_aside), []
     if settings.refine:
-        poses, mesh, rounds = _refine_rounds(photo, ids, K, poses, mesh, registration, settings)
+        unplaced = registration.unregistered + sorted(set_aside)  # placed from the others
+        poses, mesh, rounds = _refine_rounds(photo, ids, K, poses, mesh, unplaced, settings)
     timings["total_s"] = time.perf_counter() - started
     return {
         "registration": registration,
@@ -336,6 +390,10 @@ def solve(photo, ids, K, crops, features, workdir, settings: Settings, progress:
         "coverage": coverage,
         "timings": timings,
     }
+
+
+def _without(poses: dict, set_aside) -> dict:
+    return {i: T for i, T in poses.items() if i not in set_aside}
 
 
 def _drop_unsupported(registration, instance_ids, pairs, pair_report, K, size, workdir, settings: Settings):
@@ -418,11 +476,10 @@ def _photo_tracks(gray, ids, K, registration: mapping.Registration, points, sett
     return {**stats.as_dict(), "reprojection_error_px": error}
 
 
-def _refine_rounds(photo, ids, K, poses, mesh, registration, settings: Settings):
+def _refine_rounds(photo, ids, K, poses, mesh, unregistered: list[int], settings: Settings):
     """Refine the poses against the masks and pixels with the hull, carve again; keep a round
-    while the mean residual falls."""
+    while the mean residual falls. ``unregistered`` copies are placed from the others first."""
     rounds, best = [], None
-    unregistered = list(registration.unregistered)
     for k in range(settings.refine_rounds):
         result = refine.refine_poses(mesh, K, ids, photo, poses, unregistered=unregistered, seed=settings.seed)
         residual = float(np.nanmean(list(result.residual_after.values())))
@@ -455,7 +512,8 @@ def run(
     check_output(out_dir, "duplicates")
     camera, photo = load_photo(cameras_dir, image)
     ids = load_ids(masks_path, camera)
-    listed = [int(entry["id"]) for entry in json.loads(Path(instances_path).read_text())["instances"]]
+    names = mask_names(json.loads(Path(instances_path).read_text())["instances"])
+    listed = list(names)
     if len(listed) < MIN_INSTANCES:
         raise SceneError(
             instances_path, "instances", f"at least {MIN_INSTANCES} instances of the object; found {len(listed)}"
@@ -465,7 +523,7 @@ def run(
     K = intrinsics(camera)
     with atomic_dir(out_dir, kind="duplicates") as tmp:
         found = solve(photo, ids, K, crops, features, tmp / "colmap", settings, progress)
-        report = _write(tmp, found, camera, K, photo, ids, listed, settings)
+        report = _write(tmp, found, camera, K, photo, names, settings)
         # keep COLMAP's database (its matches open in COLMAP's GUI); its models are sparse/ now
         for models in ("models", "retriangulated"):
             shutil.rmtree(tmp / "colmap" / models, ignore_errors=True)
@@ -473,7 +531,7 @@ def run(
     return report
 
 
-def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settings: Settings) -> dict:
+def _write(tmp: Path, found: dict, camera: Camera, K, photo, names: dict[int, dict], settings: Settings) -> dict:
     centre, scale, note = object_frame(found["mesh"], settings.object_size)
     world_from_cam = np.linalg.inv(camera.world_to_camera())
     registration = found["registration"]
@@ -482,14 +540,14 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
     mesh = found["mesh"]
     mesh = Mesh(((mesh.positions - centre) / scale).astype(np.float32), mesh.faces, uvs=None)
     write_ply(tmp / "object.ply", mesh)
-    write_poses(tmp / "poses_colmap.json", poses_document(before, listed, world_from_cam, note, "COLMAP"))
+    write_poses(tmp / "poses_colmap.json", poses_document(before, names, world_from_cam, note, "COLMAP"))
     source = "COLMAP, refined by render-and-compare" if settings.refine else "COLMAP"
-    write_poses(tmp / "poses.json", poses_document(after, listed, world_from_cam, note, source))
+    write_poses(tmp / "poses.json", poses_document(after, names, world_from_cam, note, source))
     mapping.write_model(registration, tmp / "sparse", registration.origin + centre, scale)
     write_overlay(tmp / "overlay.png", photo, mesh, K, after)
     report = {
         "settings": asdict(settings),
-        "instances": listed,
+        "instances": sorted(names),
         "registered_by_colmap": sorted(registration.poses),
         "unregistered_by_colmap": registration.unregistered,
         "placed": sorted(found["poses"]),
@@ -499,8 +557,9 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, ids, listed, settin
         "refinement": found["rounds"],
         "subpixel": found["subpixel"],
         "photo_tracks": found["photo_tracks"],
-        "hull_shape": found["shape"],
+        "hull_shape": {key: value for key, value in found["shape"].items() if key != "set_aside"},
         "hull_coverage": {str(i): float(c) for i, c in sorted(found["coverage"].items())},
+        "set_aside": [{"instance": i, "hull_coverage": c} for i, c in sorted(found["shape"]["set_aside"].items())],
         "scale": note,
         "mesh": {"vertices": int(len(mesh.positions)), "faces": int(len(mesh.faces))},
         "timings": found["timings"],

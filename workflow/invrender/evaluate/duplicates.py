@@ -592,18 +592,19 @@ def read_instances(path) -> dict:
     return doc
 
 
-def poses_by_id(doc, where) -> tuple[dict[int, np.ndarray], int]:
-    """({mask value: T_obj2world} of the registered instances, how many instances are listed).
-    An instance is known by the value its pixels have in the id image: ``mask_value``, else its
-    ``instance_id`` (poses.json, the form scene/poses.py documents)."""
+def poses_by_id(doc, where, key: str = "mask_value") -> tuple[dict[int, np.ndarray], int]:
+    """({id: T_obj2world} of the registered instances, how many instances are listed), each known
+    by the value its pixels have in the id image it goes with: the truth's masks name copies by
+    ``mask_value`` (else ``instance_id``); the duplicates stage's poses name them by
+    ``instance_id``, the segment stage's id (their ``mask_value`` is the user's own masks')."""
     from ..scene.poses import validate_poses
 
     validate_poses(doc, where)
     out = {}
     for k, entry in enumerate(doc["instances"]):
-        value = entry.get("mask_value", entry["instance_id"])
+        value = entry.get(key, entry["instance_id"])
         if not isinstance(value, int) or isinstance(value, bool):
-            raise SceneError(where, f"instances[{k}].mask_value", f"an integer id of the mask, got {value!r}")
+            raise SceneError(where, f"instances[{k}].{key}", f"an integer id of the mask, got {value!r}")
         if entry.get("registered", True):
             out[value] = np.asarray(entry["T_obj2world"], np.float64)
     return out, len(doc["instances"])
@@ -642,7 +643,7 @@ def load_inputs(segmentation_dir, duplicates_dir, truth_dir) -> dict:
     for stage, name in (("after", "poses.json"), ("before", "poses_colmap.json")):
         path = dup / name
         if stage == "after" or path.exists():
-            poses, listed = poses_by_id(read_poses(path), path)
+            poses, listed = poses_by_id(read_poses(path), path, key="instance_id")
             unknown = sorted(set(poses) - set(labels))
             if unknown:
                 raise SceneError(path, "instance_id", f"ids of the segmentation's instances ({labels}), got {unknown}")

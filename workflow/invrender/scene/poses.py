@@ -4,7 +4,10 @@
      "instances": [{"instance_id": 1, "mask_value": 1, "registered": true,
                     "T_obj2world": [[r, r, r, tx], [r, r, r, ty], [r, r, r, tz], [0, 0, 0, 1]]}, ...]}
 
-T_obj2world is row-major and rigid (a rotation and a translation: the copies are the same object,
+`instance_id` is the copy's id in the masks that go with the poses (the duplicates stage's: the
+segment stage's renumbered id, its pixels' value in segmentation/masks); `mask_value` (or
+`mask_file`, for a folder of masks) is how the user's own masks name it, so a pose maps back to the
+object it came from. T_obj2world is row-major and rigid (a rotation and a translation: the copies are the same object,
 not scaled ones); `registered: false` marks a copy whose pose was not recovered (it is skipped).
 A v2 scene says the same directly: objects sharing one mesh and material set, each with its own
 transform (docs/scene-format.md).
