@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..scene.types import SceneError
+from . import duplicates_independent as independent
 from .harness import Ledger, Stopped, format_table, quiet_pyopencl, run_scenes
 
 log = logging.getLogger("invrender.bench")
@@ -88,6 +89,8 @@ VARIANTS = {
     # and those points made tracks in every copy that sees them, the copies adjusted again
     # (extend.py): a copy that COLMAP's matches saw on one face only is held by the others' print
     "provided-asift-tracks": {**PHOTO, "photo_tracks": True},
+    # the same settings from the segment stage's masks of the photograph (the opencv backend)
+    "asift-tracks": {**{k: v for k, v in PHOTO.items() if k != "masks"}, "photo_tracks": True},
     # and COLMAP's reprojection error bound halved (mapping.py): with six copies a few loose tracks
     # tilt a copy (box-6-hd: 1.02 -> 0.48 degrees mean), but box-10-hd's go 0.15 -> 0.34 degrees and
     # box-20-hd's copies are lost: a per-photograph setting, not the headline (docs/benchmarks.md)
@@ -102,6 +105,9 @@ MASK_SOURCES = {"opencv": "segmentation", "provided": "segmentation-provided"}
 HEADLINE_VARIANTS = ("provided-asift-refine",)
 ABLATION_SCENES = ("box-10-hd",)
 ABLATION_VARIANTS = ("default", "no-rotation-search", "sift", "asift", "provided-asift-refine")
+# On the captures Mitsuba rendered (duplicates_independent.py): the best settings of the HD
+# fixtures, from the capture's masks and from the photograph's
+INDEPENDENT_VARIANTS = ("provided-asift-tracks", "asift-tracks")
 STEPS = ("cameras", "segment", "crop", "solve", "evaluate")
 
 
@@ -127,12 +133,19 @@ def _names(text, known, what: str) -> list[str]:
 def settings_from(quick: bool, scenes, variants, work) -> Settings:
     from ..synthesize.duplicates import DUPLICATES_PRESETS
 
-    scenes = _names(scenes, sorted(DUPLICATES_PRESETS), "scenes") or list(QUICK_SCENES if quick else SCENES)
+    known = [*sorted(DUPLICATES_PRESETS), *independent.INDEPENDENT_SCENES, "independent"]
+    scenes = _names(scenes, known, "scenes") or list(QUICK_SCENES if quick else SCENES)
+    if "independent" in scenes:  # every capture Mitsuba renders, both splits
+        at = scenes.index("independent")
+        chosen_captures = independent.QUICK_INDEPENDENT if quick else independent.INDEPENDENT_SCENES
+        scenes = [*scenes[:at], *chosen_captures, *scenes[at + 1 :]]
     chosen = _names(variants, list(VARIANTS), "variants")
     per_scene = {}
     for scene in scenes:
         if chosen is not None:
             per_scene[scene] = chosen
+        elif independent.is_independent(scene):
+            per_scene[scene] = list(INDEPENDENT_VARIANTS)
         elif quick:
             per_scene[scene] = ["default"]
         else:
@@ -162,6 +175,11 @@ def capture_of(preset: str, work: Path, spp: int) -> tuple[Path, dict | None, st
     """The capture of `preset`: an earlier render in $INVRENDER_DUPLICATES_CAPTURES if its config
     is exactly the preset's, else WORK/captures/<preset> (rendered now unless there). (folder,
     measurements, source)."""
+    if independent.is_independent(preset):
+        out = work / "captures" / preset
+        measured = Ledger(work / "captures").run(f"render {preset}", out, independent.render, preset, out)
+        spp = independent.independent_config(preset)[1]
+        return out, measured, f"rendered by Mitsuba 3 at {spp} spp, the photo its 8-bit sRGB image"
     reuse = Path(os.environ.get(REUSE_VARIABLE) or work / "captures")
     earlier = reuse / preset
     config = reuse / f"{preset}.json"

@@ -288,17 +288,22 @@ def _agreeing_hull(carve, poses: dict, ids, K, settings: Settings) -> tuple[Mesh
         except hull.EmptyHull:
             worst = _worst_covered(carve, kept, ids, K) if len(kept) > 2 else None
         if worst is None:
+            hint = (
+                ""
+                if settings.hull_outliers is None
+                else " (rough poses need hull_outliers null, a tenth of the copies)"
+            )
             raise SceneError(
                 "duplicates",
                 "hull",
                 f"a visual hull inside the masks of the {len(kept)} posed copies; every voxel lies outside some "
-                f"copy's mask (hull_outliers {settings.hull_outliers}): their poses disagree (rough poses need "
-                "hull_outliers null, a tenth of the copies)",
+                f"copy's mask (hull_outliers {settings.hull_outliers}), whichever copies are set aside: their "
+                f"poses disagree{hint}",
             )
         instance, covered = worst
         log.warning(
-            "the posed copies leave no voxel of a hull: copy %d set aside (the hull of the others covers its mask "
-            "at IoU %.2f), carving again from %d copies", instance, covered, len(kept) - 1,
+            "the posed copies leave no voxel of a hull: copy %d set aside (the loosest hull that leaves any covers "
+            "its mask worst, at IoU %.2f), carving again from %d copies", instance, covered, len(kept) - 1,
         )  # fmt: skip
         set_aside[instance] = covered
         del kept[instance]
