@@ -313,6 +313,19 @@ def test_the_floor_the_boxes_rest_on_carves_what_no_silhouette_does():
     assert cut.mean() < 0.01, f"{100 * cut.mean():.1f} % of the true surface cut by the floor"
 
 
+def test_a_copy_posed_far_under_the_floor_gets_no_floor_of_its_own():
+    # its floor plane, in its own object frame, would lie above the whole object and carve it all
+    mesh, poses, K, up = box_scene()
+    wrong = {i: T.copy() for i, T in poses.items()}
+    diagonal = float(np.linalg.norm(np.ptp(mesh.positions, axis=0)))
+    wrong[2][:3, 3] -= up * 0.8 * diagonal  # 0.8 diagonals down (skirts reach 0.16)
+    fitted = floor.fit_floor(mesh, wrong, [0.0, -1.0, 0.0])
+    assert fitted.misposed == [2] and floor.floor_plane(mesh, poses, [0.0, -1.0, 0.0]) is not None
+    assert floor.fit_floor(mesh, poses, [0.0, -1.0, 0.0]).misposed == []
+    below = [(n, d) for (n, d) in floor.floors_in_object_frame(fitted.plane, {2: wrong[2]})]
+    assert (mesh.positions.astype(np.float64) @ below[0][0] < below[0][1]).all()  # it would carve it all
+
+
 def floor_gaps(mesh: Mesh, poses: dict, plane) -> np.ndarray:
     """Per copy, how far below its true lowest point the floor n . X = offset lies (negative: the
     floor cuts the true surface)."""

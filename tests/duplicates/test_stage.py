@@ -187,3 +187,20 @@ def test_a_copy_given_a_wrong_pose_is_set_aside_and_the_hull_kept(monkeypatch):
     truth, _ = hull.visual_hull(ids, poses, K, bounds, resolution=48, k=0)
     size = np.ptp(solved["mesh"].positions, axis=0)
     np.testing.assert_allclose(size, np.ptp(truth.positions, axis=0), rtol=0.05)
+
+
+def test_a_floor_that_leaves_no_hull_is_dropped_not_the_stage(monkeypatch):
+    """A floor fitted over the copies (a wrong model tilts the fit) would carve every voxel:
+    the hull is carved without it, and duplicates.json's hull_shape.floor says so."""
+    from posed_copies import box_scene, ids_for
+
+    from invrender.duplicates import floor
+
+    mesh, poses, K, up = box_scene(9)
+    ids = ids_for(mesh, poses, K)
+    above = floor.Floor(normal=up, offset=10.0, misposed=[])  # n . X >= 10 m: nothing is above it
+    monkeypatch.setattr(floor, "fit_floor", lambda *args: above)
+    carved, report, _ = stage._carve(ids, poses, K, np.zeros((0, 3)), settings(hull_outliers=0, hull_resolution=48,
+                                                                                hull_floor=True))  # fmt: skip
+    assert report["floor"]["carved"] is False and report["set_aside"] == {}
+    assert len(carved.faces) > 0

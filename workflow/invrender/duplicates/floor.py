@@ -17,19 +17,23 @@ face the hull keeps fins and skirts that no silhouette carves, and a floor throu
 nothing (box-6-hd: 8-24 mm below the copies' lowest points, which are within 2 mm of the true
 bottoms). A copy whose contact lies more than OUTLIER below the median is left out of the fit:
 its lowest point is a skirt, not the floor. The offset is the lowest of the kept contacts, lowered
-by SLACK (a copy resting on a corner, or lifted a little, must not lose its true surface).
+by SLACK (a copy resting on a corner, or lifted a little, must not lose its true surface). A copy
+whose contact lies more than MISPOSED below the floor is not on a skirt but posed wrong (seen on a
+Mitsuba capture: three of six copies 1.5 diagonals under the others' floor): its floor would carve
+the whole object, so it gets none (`Floor.misposed`).
 """
 
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 
 from ..scene.resting import MIN_COPIES, contacts, resting_normal
 from ..scene.types import Mesh
 
-__all__ = ["floor_plane", "floors_in_object_frame"]
+__all__ = ["Floor", "fit_floor", "floor_plane", "floors_in_object_frame"]
 
 log = logging.getLogger(__name__)
 
@@ -38,12 +42,30 @@ OUTLIER = 0.02  # of the diagonal: a contact this far below the median is a skir
 SLACK = 0.005  # of the diagonal: the floor is lowered by this much before it carves
 MIN_POINTS = 50  # COLMAP's points that fix the contacts; fewer, and the hull's vertices do
 TRIM = 0.01  # of a copy's points, the lowest share left out of its contact
+MISPOSED = 0.3  # of the diagonal: a contact this far below the floor is a wrong pose (skirts: <= 0.16)
+
+
+class Floor(NamedTuple):
+    normal: np.ndarray  # (3,) camera frame, on the side of up
+    offset: float  # n . X = offset
+    misposed: list[int]  # copies whose contact lies more than MISPOSED below it: no floor for them
+
+    @property
+    def plane(self) -> tuple[np.ndarray, float]:
+        return self.normal, self.offset
 
 
 def floor_plane(mesh: Mesh, poses: dict, up, points=None) -> tuple[np.ndarray, float] | None:
-    """(normal, offset) of the floor n . X = offset in the camera frame, n on the side of ``up``
-    (module docstring; the fit: scene/resting.py), from COLMAP's ``points`` (the mesh's frame)
-    when there are enough, else from the mesh's vertices; None with fewer than three copies."""
+    """(normal, offset) of ``fit_floor``'s floor, None where it has none."""
+    fitted = fit_floor(mesh, poses, up, points)
+    return None if fitted is None else fitted.plane
+
+
+def fit_floor(mesh: Mesh, poses: dict, up, points=None) -> Floor | None:
+    """The floor n . X = offset in the camera frame, n on the side of ``up`` (module docstring;
+    the fit: scene/resting.py), from COLMAP's ``points`` (the mesh's frame) when there are enough,
+    else from the mesh's vertices, with the copies posed too far under it; None with fewer than
+    three copies."""
     if len(poses) < MIN_COPIES:
         return None
     positions = np.asarray(mesh.positions, np.float64)
@@ -59,7 +81,9 @@ def floor_plane(mesh: Mesh, poses: dict, up, points=None) -> tuple[np.ndarray, f
         "COLMAP's points" if on_object else "the hull", int(kept.sum()), len(height), int((~kept).sum()),
         float((height[kept].min() - height.min()) / diagonal),
     )  # fmt: skip
-    return normal, float(height[kept].min() - SLACK * diagonal)
+    offset = float(height[kept].min() - SLACK * diagonal)
+    misposed = [i for i, h in zip(sorted(poses), height, strict=True) if h < offset - MISPOSED * diagonal]
+    return Floor(normal, offset, misposed)
 
 
 def floors_in_object_frame(plane: tuple[np.ndarray, float], poses: dict) -> list[tuple[np.ndarray, float]]:

@@ -252,19 +252,26 @@ def _carve(ids, poses, K, points, settings: Settings, gray=None) -> tuple[Mesh, 
     the third is the photo-consistent points (none without hull_photo)."""
     bounds = hull.bounds_from_points(points) if len(points) >= 20 else hull.bounds_from_masks(ids, poses, K)
 
-    def carve(kept, k=settings.hull_outliers, plane=None):
-        floors = floor.floors_in_object_frame(plane, kept) if plane is not None else ()
+    def carve(kept, k=settings.hull_outliers, plane=None, misposed=()):
+        on_floor = {i: T for i, T in kept.items() if i not in misposed}
+        floors = floor.floors_in_object_frame(plane, on_floor) if plane is not None else ()
         return hull.visual_hull(ids, kept, K, bounds, resolution=settings.hull_resolution, k=k,
                                 target_faces=settings.hull_faces, floors=floors)  # fmt: skip
 
     mesh, kept, set_aside = _agreeing_hull(carve, poses, ids, K, settings)
     report = {"floor": None, "snap": None, "photo": None, "set_aside": set_aside}
     agreed = np.zeros((0, 3))
-    plane = floor.floor_plane(mesh, kept, IMAGE_UP, points) if settings.hull_floor else None
-    if plane is not None:
-        mesh, kept, more = _agreeing_hull(functools.partial(carve, plane=plane), kept, ids, K, settings)
-        set_aside.update(more)
-        report["floor"] = {"normal_camera": plane[0].tolist(), "offset_camera": plane[1]}
+    fitted = floor.fit_floor(mesh, kept, IMAGE_UP, points) if settings.hull_floor else None
+    if fitted is not None:
+        report["floor"] = {"normal_camera": fitted.normal.tolist(), "offset_camera": fitted.offset,
+                           "misposed": fitted.misposed, "carved": True}  # fmt: skip
+        resting = functools.partial(carve, plane=fitted.plane, misposed=fitted.misposed)
+        try:
+            mesh, kept, more = _agreeing_hull(resting, kept, ids, K, settings)
+            set_aside.update(more)
+        except SceneError:  # the fit is off (a wrong model tilts it): the hull without it
+            log.warning("the floor fitted under the copies leaves no hull: carved without it")
+            report["floor"]["carved"] = False
     if not settings.hull_snap:
         return mesh, report, agreed
     snapped, how = snap.snap_to_points(mesh, points)
