@@ -12,6 +12,8 @@ It reads (relative to ``--out``, where the benchmarks write):
     accuracy/accuracy.json                        bench accuracy: the demo room's knees
     milo-independent.json                         bench milo: rooms rendered by Mitsuba, each
                                                   recovery beside the constant guess
+    duplicates-independent.json                   bench duplicates --scenes independent: boxes
+                                                  rendered by Mitsuba, the capture's masks
 
 Nothing is measured or computed here: every cell is a number of those files (the paper's too,
 which the benchmarks store beside ours), formatted. Under the table it writes the command and the
@@ -38,6 +40,7 @@ SOURCES = {
     "room": "room.json",
     "accuracy": "accuracy/accuracy.json",
     "milo": "milo-independent.json",
+    "independent_poses": "duplicates-independent.json",
 }
 HEADER = ("result", "scenes", "invrender", "paper")
 DATE = re.compile(r"on (\d{4}-\d{2}-\d{2}) from")
@@ -114,6 +117,15 @@ def rows(docs: dict[str, dict]) -> list[tuple[str, str, str, str]]:
         if len(set(theirs)) == 1:
             theirs = theirs[:1]
         out.append((what, copies, _join([r[ours] for r in sfd[source]], fmt), note + _join(theirs, fmt)))
+    independent = _by_scene(docs["independent_poses"], "independent_poses", variant="provided-asift-tracks")
+    out.append(
+        (
+            "Structure from Duplicates on boxes Mitsuba rendered (their masks): rotation mean (median) [deg]",
+            " / ".join(r["scene"].removeprefix("mbox-").replace("-", " ", 1) for r in independent),
+            " / ".join(f"{r['rot_after_mean']:.1f} ({r['rot_after_median']:.2f})" for r in independent),
+            "Table 2: " + _join([r["paper_rot"] for r in independent], ".3f"),
+        )
+    )
     room = _by_scene(docs["room"], "room", row="stages")
     layouts = " / ".join(r["scene"] for r in room)
     for what, key, fmt in ROOM_ROWS:
