@@ -7,7 +7,7 @@ from milo_capture import TINY, training_on
 
 from invrender.bench.milo_independent import truth_maps
 from invrender.milo.config import resolve
-from invrender.milo.importance import TexelPixels, emitting_start
+from invrender.milo.importance import TexelPixels, emitting_start, per_group_median
 from invrender.milo.reflectance import correction, refine_reflectance, smoothed_log
 from invrender.milo.stage import capture_scale
 from invrender.scene.atlas import AtlasTexels
@@ -24,6 +24,20 @@ def test_smoothing_averages_log_ratios_over_neighbours_and_fills_unseen_texels()
     np.testing.assert_allclose(np.exp(mean[0, :2]), 2.0)
     np.testing.assert_allclose(np.exp(mean[0, 2]), 1.0)  # unseen: its one seen neighbour's ratio
     assert reached.tolist() == [[True, True, True, False]]
+
+
+def test_the_projection_takes_each_texels_median_over_its_views():
+    """per_group_median against numpy's median per group; an empty group reads 0, and one
+    outlying view (a pixel on a lamp's rim) does not move a texel seen by three."""
+    rng = np.random.default_rng(0)
+    groups, values = rng.integers(0, 50, 400), rng.normal(size=(400, 3))
+    count = np.bincount(groups, minlength=52)
+    got = per_group_median(groups, values, count)
+    for g in range(52):
+        want = np.median(values[groups == g], axis=0) if count[g] else np.zeros(3)
+        np.testing.assert_allclose(got[g], want)
+    outlier = per_group_median(np.zeros(3, int), np.array([[0.5] * 3, [0.5] * 3, [40.0] * 3]), np.array([3]))
+    np.testing.assert_allclose(outlier, 0.5)
 
 
 def test_a_pass_keeps_the_reflectors_median_and_moves_by_the_square_root_of_the_ratio():

@@ -53,18 +53,32 @@ class TexelPixels:
         return cls(atlas, rows, cols, seen)
 
     def project(self, images) -> tuple[np.ndarray, np.ndarray]:
-        """(radiance (H, W, 3), views (H, W)): each texel's mean over the views that see it of
-        `images` (one (height, width, 3) array per view), and how many views see it."""
-        total = np.zeros((len(self.rows), 3))
-        count = np.zeros(len(self.rows))
-        for (texels, pixels), image in zip(self.seen, images):
-            total[texels] += np.asarray(image).reshape(-1, 3)[pixels]
-            count[texels] += 1
+        """(radiance (H, W, 3), views (H, W)): each texel's median over the views that see it of
+        `images` (one (height, width, 3) array per view), and how many views see it. The median,
+        not the mean: a view whose pixel mixes the texel with what lies beside it (an edge, a
+        lamp's rim, a highlight) does not move it."""
+        texels = np.concatenate([t for t, _ in self.seen])
+        values = np.concatenate([np.asarray(im).reshape(-1, 3)[p] for (_, p), im in zip(self.seen, images)])
+        count = np.bincount(texels, minlength=len(self.rows))
         radiance = np.zeros((*self.atlas.shape, 3), np.float32)
+        radiance[self.rows, self.cols] = per_group_median(texels, values, count)
         views = np.zeros(self.atlas.shape, np.int32)
-        radiance[self.rows, self.cols] = total / np.maximum(count, 1)[:, None]
         views[self.rows, self.cols] = count
         return radiance, views
+
+
+def per_group_median(groups: np.ndarray, values: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(G, C): per group g in 0..G-1 the median of the `values` (N, C) whose `groups` (N,) is g
+    (the mean of the two middle ones for an even count; 0 for an empty group), by one sort per
+    channel."""
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    low, high = start + (count - 1) // 2, start + count // 2
+    out = np.zeros((len(count), values.shape[1]))
+    seen = count > 0
+    for c in range(values.shape[1]):
+        ordered = values[np.lexsort((values[:, c], groups)), c]
+        out[seen, c] = 0.5 * (ordered[low[seen]] + ordered[high[seen]])
+    return out
 
 
 def emitting_start(radiance: np.ndarray, views: np.ndarray, emission: float, fraction: float) -> np.ndarray:
