@@ -122,7 +122,7 @@ def rows(docs: dict[str, dict]) -> list[tuple[str, str, str, str]]:
         (
             "Structure from Duplicates on boxes Mitsuba rendered (their masks): rotation mean (median) [deg]",
             " / ".join(r["scene"].removeprefix("mbox-").replace("-", " ", 1) for r in independent),
-            " / ".join(f"{r['rot_after_mean']:.1f} ({r['rot_after_median']:.2f})" for r in independent),
+            " / ".join(f"{r['rot_after_mean']:.2f} ({r['rot_after_median']:.2f})" for r in independent),
             "Table 2: " + _join([r["paper_rot"] for r in independent], ".3f"),
         )
     )
