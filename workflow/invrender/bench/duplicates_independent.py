@@ -14,13 +14,14 @@ thing yet: an area lamp, a low-texture object, a textured support other than the
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 
-from ..synthesize.duplicates import _preset
+from ..synthesize.duplicates import DUPLICATES_PRESETS
 
 SPLITS = {"tuning": 0, "held-out": 1000}  # the draws' seed offset per split
 COUNTS = (6, 10, 20)
@@ -40,7 +41,7 @@ def independent_config(name: str) -> tuple[dict, int]:
     count = int(count)
     seed = SPLITS[split] + count
     rng = np.random.default_rng(seed)
-    config = _preset("box", count, hd=False)
+    config = copy.deepcopy(DUPLICATES_PRESETS[f"box-{count}-ci"])  # its distance is the HD preset's too
     edges = np.sort(rng.uniform(0.06, 0.13, 3))[::-1]  # three different edges, largest first
     config["object"] = {"kind": "box", "size": [float(e) for e in rng.permutation(edges)]}
     scale = float(edges[0]) / 0.10  # the presets' extents and distances are for a 0.10 m box
@@ -49,6 +50,7 @@ def independent_config(name: str) -> tuple[dict, int]:
     placement["margin_px"] = 6
     config["floor"]["size"] = [float(e * scale * 1.3) for e in config["floor"]["size"]]
     config["floor"]["tile"] = config["floor"]["cell"] = float(rng.choice([0.05, 0.1, 0.15]))
+    distance = config["camera"]["distance"]
     config["camera"] = {
         "width": WIDTH,
         "height": HEIGHT,
@@ -57,7 +59,7 @@ def independent_config(name: str) -> tuple[dict, int]:
         "azimuth_deg": float(rng.uniform(0.0, 360.0)),
     }
     fov_scale = np.tan(np.radians(25.0)) / np.tan(np.radians(config["camera"]["fov_deg"] / 2))
-    config["camera"]["distance"] = float(config_distance(count) * scale * fov_scale)
+    config["camera"]["distance"] = float(distance * scale * fov_scale)
     overcast = bool(rng.random() < 0.3)
     config["environment"] = {
         "sun_elevation_deg": float(rng.uniform(20.0, 70.0)),
@@ -68,11 +70,6 @@ def independent_config(name: str) -> tuple[dict, int]:
     config["atlas_resolution"] = 512
     config["seed"] = seed
     return config, int(rng.choice(SPP_CHOICES))
-
-
-def config_distance(count: int) -> float:
-    """The HD presets' camera distance for ``count`` copies of a 0.10 m box."""
-    return _preset("box", count, hd=True)["camera"]["distance"]
 
 
 def render(name: str, out: Path) -> None:

@@ -18,9 +18,9 @@ nothing (box-6-hd: 8-24 mm below the copies' lowest points, which are within 2 m
 bottoms). A copy whose contact lies more than OUTLIER below the median is left out of the fit:
 its lowest point is a skirt, not the floor. The offset is the lowest of the kept contacts, lowered
 by SLACK (a copy resting on a corner, or lifted a little, must not lose its true surface). A copy
-whose contact lies more than MISPOSED below the floor is not on a skirt but posed wrong (seen on a
-Mitsuba capture: three of six copies 1.5 diagonals under the others' floor): its floor would carve
-the whole object, so it gets none (`Floor.misposed`).
+whose contact lies more than MISPOSED below the floor is not on a skirt: its pose or the fit is
+wrong (on a Mitsuba capture two wrong copies of six tilted the fit 1.5 diagonals over three right
+ones), and its floor would carve the whole object, so it gets none (`Floor.misposed`).
 """
 
 from __future__ import annotations

@@ -559,7 +559,7 @@ def _write(tmp: Path, found: dict, camera: Camera, K, photo, names: dict[int, di
     write_overlay(tmp / "overlay.png", photo, mesh, K, after)
     report = {
         "settings": asdict(settings),
-        "instances": sorted(names),
+        "instances": list(names),
         "registered_by_colmap": sorted(registration.poses),
         "unregistered_by_colmap": registration.unregistered,
         "placed": sorted(found["poses"]),
