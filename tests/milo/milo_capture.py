@@ -26,15 +26,25 @@ TINY_ROOM = {"atlas_resolution": 64, "cameras": {"count": 3, "width": 32, "heigh
 TINY = {"iterations": 6, "rays": 512, "spp": 2, "layers": 2, "width": 16, "skip_layers": 0, "warm_start_steps": 5}
 
 
-def build_capture(root: Path) -> Path:
-    (root / "room.yaml").write_text(yaml.safe_dump(TINY_ROOM))
+def build_capture(root: Path, room: dict = TINY_ROOM, spp: int = 16) -> Path:
+    (root / "room.yaml").write_text(yaml.safe_dump(room))
     capture = root / "capture"
-    assert main(["synthesize", "room", "--out", str(capture), "--config", str(root / "room.yaml"), "--spp", "16"]) == 0
+    assert (
+        main(["synthesize", "room", "--out", str(capture), "--config", str(root / "room.yaml"), "--spp", str(spp)]) == 0
+    )
     assert (
         main(["cameras", str(capture / "sparse"), "--images", str(capture / "images"), "--out", str(root / "cameras")])
         == 0
     )
-    geometry = ["geometry", str(capture / "mesh.ply"), "--atlas-resolution", "64", "--out", str(root / "geometry")]
+    resolution = str(room["atlas_resolution"])
+    geometry = [
+        "geometry",
+        str(capture / "mesh.ply"),
+        "--atlas-resolution",
+        resolution,
+        "--out",
+        str(root / "geometry"),
+    ]
     assert main(geometry) == 0
     return root
 

@@ -27,6 +27,7 @@ _COMMON = {
     "reflectance_passes": 4,  # texels: kd corrected by captured / rendered radiance first (reflectance.py)
     "reflectance_spp": 64,  # texels: samples per pixel of those renders
     "reflectance_radius": 3.0,  # texels: the correction averaged within this many texel spacings
+    "windows": True,  # texels: windows found in the photographs (window.py) show the sky, kw = 1
     "template": True,  # MILO-Net's material template (False: Fig. 12's plain MLPs)
     "materials": 64,  # Q, the template's materials
     "emitters": 1,  # S, its light-emitting materials (one window material besides)

@@ -64,9 +64,9 @@ def correction(captured: np.ndarray, rendered: np.ndarray, reflecting: np.ndarra
     return np.where(reached[..., None], np.exp(DAMPING * log_ratio), 1.0)
 
 
-def refine_reflectance(training, pixels: TexelPixels, captured: np.ndarray, emitting: np.ndarray) -> list[float]:
+def refine_reflectance(training, pixels: TexelPixels, captured: np.ndarray, lights: np.ndarray) -> list[float]:
     """`reflectance_passes` passes on `training`'s texels model; `captured` is the photographs'
-    (H, W, 3) projection, `emitting` the emitters (H, W). Returns each pass's median |log| of
+    (H, W, 3) projection, `lights` the texels that emit or are windows (H, W). Returns each pass's median |log| of
     its factor (how far kd still moved); the passes' seconds count as training time."""
     s, model, renderer = training.settings, training.net, training.renderer
     radius = s["reflectance_radius"]
@@ -80,7 +80,7 @@ def refine_reflectance(training, pixels: TexelPixels, captured: np.ndarray, emit
             renderer.render(c, s["reflectance_spp"], seed, aovs=False)["radiance"] for c in training.views.cameras
         ]
         rendered, views = pixels.project(images)
-        reflecting = (views > 0) & ~emitting
+        reflecting = (views > 0) & ~lights
         factor = correction(captured, rendered, reflecting, pairs, floor)
         moved.append(float(np.median(np.abs(np.log(factor[reflecting]))) if reflecting.any() else 0.0))
         model.scale_reflectance(training.texels.gather_grown(factor))

@@ -42,6 +42,7 @@ from .reflectance import refine_reflectance
 from .texel_model import TexelMaps
 from .texels import Texels
 from .train import LOG_COLUMNS, Training, Views
+from .window import find_windows
 
 log = logging.getLogger(__name__)
 VISIBILITY_STRIDE = 4  # every 4th pixel in x and y decides whether a camera sees the mesh
@@ -128,12 +129,18 @@ def run(
         renderer.importance = radiance @ LUMINANCE.astype(np.float32)
     emitting = emitting_start(radiance, seen, emission, settings["warm_start_fraction"])
     model.warm_start(texels, emitting, radiance, seen, settings)
+    windows = None
+    if settings["model"] == "texels" and settings["windows"]:
+        windows = find_windows(pixels, images, train_cams, settings["sky_resolution"])
+    if windows is not None:
+        model.open_windows(texels, windows)
+        emitting = emitting & ~windows.texels
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     state = checkpoint.resume(out / "checkpoints", resume, settings, digests)
     if state is not None:
         training.restore(state)
     elif settings["model"] == "texels" and settings["reflectance_passes"]:
-        refine_reflectance(training, pixels, radiance, emitting)
+        refine_reflectance(training, pixels, radiance, emitting if windows is None else emitting | windows.texels)
     log.info(
         "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views; from %d",
         preset,

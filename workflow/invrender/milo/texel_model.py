@@ -8,7 +8,8 @@ start): an emitter has ke = exp(e) (RGB, started at its observed radiance) and k
 reflecting texel has kd = sigmoid(a) (RGB, started at its observed radiance over the typical
 irradiance: the per-texel guess without light transport), a grey specular ks = sigmoid(b) and a
 roughness ka, and no emission; kd is a share of 1 - ks, so kd + ks <= 1 holds by construction.
-The sky is kg = exp(g) per cube texel. Priors: an L1 difference between texels that are
+A window texel (window.py finds them in the photographs) has kw = 1 and nothing else: it shows
+the sky, kg = exp(g) per cube texel. Priors: an L1 difference between texels that are
 neighbours on the surface (a wall is one colour unless the photographs say otherwise, and texels
 few rays reach follow their neighbours), the same in log radiance over the sky, and a pull of ks
 towards a dielectric's 0.04. Before the gradient steps, reflectance.py corrects kd by light
@@ -60,6 +61,7 @@ class TexelMaps(nn.Module):
         self.ka_logit = nn.Parameter(torch.full((n, 1), float(_logit(START_KA))))
         self.ke_log = nn.Parameter(torch.full((n, 3), -10.0))
         self.register_buffer("emitter", torch.zeros(n, 1))
+        self.register_buffer("window", torch.zeros(n, 1))
         cube = 6 * settings["sky_resolution"] ** 2
         self.sky_log = nn.Parameter(torch.full((cube, 3), float(np.log(max(sky, 1e-6)))))
         self.pairs = torch.from_numpy(point_neighbour_pairs(texels.positions.numpy(), settings["smoothness_radius"]))
@@ -77,10 +79,19 @@ class TexelMaps(nn.Module):
         self.ke_log.copy_(torch.from_numpy(np.log(np.maximum(radiance, 1e-3)).astype(np.float32)))
 
     @torch.no_grad()
+    def open_windows(self, texels, windows) -> None:
+        """kw = 1 on `windows`' texels (window.Windows, the atlas's (H, W)), which neither emit nor
+        reflect; the sky starts at what the photographs show through them."""
+        window = texels.gather_grown(windows.texels.astype(np.float32)) > 0.5
+        self.window.copy_(torch.from_numpy(window.astype(np.float32))[:, None])
+        self.emitter.mul_(1.0 - self.window)
+        self.sky_log.copy_(torch.from_numpy(np.log(np.maximum(windows.sky, 1e-6)).astype(np.float32)))
+
+    @torch.no_grad()
     def scale_reflectance(self, ratio: np.ndarray) -> None:
         """Every reflecting texel's kd times `ratio` (n, 3), kept inside (0, 1 - ks)."""
         share = torch.sigmoid(self.kd_logit) * torch.from_numpy(np.asarray(ratio, np.float32))
-        self.kd_logit.copy_(torch.where(self.emitter > 0, self.kd_logit, _logit(share.numpy())))
+        self.kd_logit.copy_(torch.where(self._reflecting() > 0, _logit(share.numpy()), self.kd_logit))
 
     def optimisers(self, settings: dict) -> list:
         return [torch.optim.Adam(self.parameters(), lr=settings["lr_texels"])]
@@ -88,16 +99,16 @@ class TexelMaps(nn.Module):
     def _maps(self, rows=None) -> torch.Tensor:
         """The 11-channel maps of the texels `rows` (None: every texel)."""
         at = slice(None) if rows is None else torch.as_tensor(rows)
-        emitter = self.emitter[at]
-        reflecting = 1.0 - emitter
+        emitter, window = self.emitter[at], self.window[at]
+        reflecting = 1.0 - emitter - window
         low_ka, high_ka = RANGES["ka"]
         kd, ks, ka_unit = self._reflectance(at)
         columns = {
             "kd": kd * reflecting,
             "ks": ks.expand(-1, 3) * reflecting,
-            "ka": (low_ka + (high_ka - low_ka) * ka_unit) * reflecting + EMITTER_KA * emitter,
+            "ka": (low_ka + (high_ka - low_ka) * ka_unit) * reflecting + EMITTER_KA * (1.0 - reflecting),
             "ke": self._emission(at),
-            "kw": torch.zeros_like(emitter),
+            "kw": window,
         }
         maps = torch.cat([columns[name] for name in GRAD_CHANNELS], -1)
         assert maps.shape[1] == ATLAS_CHANNELS
@@ -108,6 +119,9 @@ class TexelMaps(nn.Module):
         of what ks leaves, so that no texel reflects more light than it receives."""
         ks = torch.sigmoid(self.ks_logit[at])
         return torch.sigmoid(self.kd_logit[at]) * (1.0 - ks), ks, torch.sigmoid(self.ka_logit[at])
+
+    def _reflecting(self, at=slice(None)) -> torch.Tensor:
+        return 1.0 - self.emitter[at] - self.window[at]
 
     def _emission(self, at=slice(None)):
         return torch.exp(torch.clamp(self.ke_log[at], max=SKY_LOG_LIMIT)) * self.emitter[at]
@@ -122,14 +136,14 @@ class TexelMaps(nn.Module):
 
     def regularisers(self, out: dict, settings: dict) -> dict[str, torch.Tensor]:
         """The priors over the whole atlas (they are cheap beside a render), `out` unused."""
-        reflecting = 1.0 - self.emitter
+        reflecting = self._reflecting()
         kd, ks, ka = self._reflectance()
         terms = {"specular": settings["specular_prior"] * ((ks - F0).abs() * reflecting).mean()}
         if len(self.pairs):
             i, j = self.pairs[:, 0], self.pairs[:, 1]
             ke = torch.log1p(self._emission())  # emitters: relative differences
             values = torch.cat([kd, ks, ka, ke], -1)
-            same_kind = (self.emitter[i] == self.emitter[j]).float()[:, 0]
+            same_kind = ((self.emitter[i] == self.emitter[j]) & (self.window[i] == self.window[j])).float()[:, 0]
             difference = (values[i] - values[j]).abs().sum(-1) * same_kind
             terms["smoothness"] = settings["smoothness"] * difference.mean()
         sky_terms = log_sky_variation(self.sky_log, self.sky_pairs, SKY_LOG_LIMIT)
