@@ -10,7 +10,7 @@ from truths import rebaked, small_room
 
 from invrender.evaluate.balls import BALL_LIGHTS, ball_errors, ball_normals, shade_balls
 from invrender.evaluate.correspond import correspond
-from invrender.evaluate.maps import ball_subset, compress, kg_mse, kg_mse_outside_sun, map_errors
+from invrender.evaluate.maps import ball_subset, compress, kg_mse, kg_mse_outside_sun, map_errors, sun_errors
 from invrender.scene.atlas import AtlasTexels
 from invrender.scene.cubemap import cube_texel_solid_angles
 from invrender.scene.types import ATLAS_MAPS, Maps, Mesh
@@ -199,3 +199,12 @@ def test_the_sky_outside_the_suns_disc_is_scored_without_the_sun():
     assert kg_mse_outside_sun(missed_sun, truth) == pytest.approx(0.0)
     assert kg_mse_outside_sun(np.full_like(truth, 1.2), truth) == pytest.approx(0.04)
     assert kg_mse_outside_sun(np.zeros_like(truth), np.zeros_like(truth)) == 0.0  # no sky, no sun
+    beside = np.ones_like(truth)
+    beside[2, 3, 5] = 150.0  # the sun a texel off: the sky is still right, the sun scored apart
+    assert kg_mse_outside_sun(beside, truth) == pytest.approx(0.0)
+    areas = cube_texel_solid_angles(n)
+    assert sun_errors(beside, truth)["power_ratio"] == pytest.approx(areas[3, 5] / areas[3, 4])
+    assert 5.0 < sun_errors(beside, truth)["direction_error_deg"] < 15.0  # a texel of a 8 x 8 face
+    assert sun_errors(missed_sun, truth) == {"power_ratio": 0.0, "direction_error_deg": None}
+    assert sun_errors(truth, truth)["direction_error_deg"] == pytest.approx(0.0, abs=1e-3)
+    assert sun_errors(truth, np.ones_like(truth)) is None

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import yaml
 
+from invrender.bench.milo_independent import CAMERAS
 from invrender.cli import main
 from invrender.milo.importance import TexelPixels, emitting_start
 from invrender.milo.network import MiloNet
@@ -22,6 +23,9 @@ from invrender.scene.mesh_io import read_mesh
 from invrender.scene.types import Maps, Scene
 
 TINY_ROOM = {"atlas_resolution": 64, "cameras": {"count": 3, "width": 32, "height": 24}}
+# The benchmark's views of its room (bench/milo_independent.py): what the window and the sun are
+# found on
+WINDOW_ROOM = {"atlas_resolution": 256, "cameras": CAMERAS}
 # A few iterations of a small network: seconds per run.
 TINY = {"iterations": 6, "rays": 512, "spp": 2, "layers": 2, "width": 16, "skip_layers": 0, "warm_start_steps": 5}
 

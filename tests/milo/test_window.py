@@ -4,9 +4,9 @@ room at night, none; the pairing statistic against hand-made observations."""
 
 import numpy as np
 import pytest
-from milo_capture import TINY_ROOM, build_capture
+from milo_capture import WINDOW_ROOM, build_capture
 
-from invrender.bench.milo_independent import CAMERAS, DARK, truth_maps
+from invrender.bench.milo_independent import DARK, truth_maps
 from invrender.milo.config import resolve
 from invrender.milo.importance import TexelPixels
 from invrender.milo.stage import training_features
@@ -19,9 +19,7 @@ from invrender.scene.cubemap import as_cube
 from invrender.scene.mesh_io import read_mesh
 from invrender.scene.types import Maps, Scene
 
-# The benchmark's room and views (bench/milo_independent.py), rendered by our kernels
-ROOM = {**TINY_ROOM, "atlas_resolution": 256, "cameras": CAMERAS}
-NIGHT = {**ROOM, "environment": DARK}
+NIGHT = {**WINDOW_ROOM, "environment": DARK}
 
 
 def windows_of(root):
@@ -35,8 +33,8 @@ def windows_of(root):
     return find_windows(pixels, images, cameras, settings["sky_resolution"]), pixels
 
 
-def test_the_window_is_found_and_the_sky_it_shows_is_the_truths(tmp_path):
-    root = build_capture(tmp_path, ROOM, spp=16)
+def test_the_window_is_found_and_the_sky_it_shows_is_the_truths(window_room):
+    root = window_room
     windows, pixels = windows_of(root)
     assert windows is not None
     truth = truth_maps(root)

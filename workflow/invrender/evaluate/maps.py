@@ -8,7 +8,8 @@
   is exact when one size divides the other), each texel weighted by its solid angle, so the MSE
   is a mean over the sphere of directions, not over the cube's unevenly sized texels.
 - Light maps MSE (the paper's 0.002): the mean of the ke, kw and kg MSEs; in linear units also
-  with kg outside the sun's disc (``kg_mse_outside_sun``).
+  with kg outside the suns' discs (``kg_mse_outside_sun``), the sun scored on its own by its
+  direction and power (``sun_errors``).
 - Material MSE (the paper's 0.015): shading balls (``balls.py``) of (kd, ks, ka), over at most
   ``max_ball_texels`` covered texels taken at an even stride (all of them if fewer).
 """
@@ -47,21 +48,47 @@ def kg_mse(recovered, truth) -> float:
     return mse(a, b, weights)
 
 
-SUN_FACTOR = 10.0  # a truth sky texel this many times brighter than the sky's median is the sun's
+SUN_FACTOR = 10.0  # a sky texel this many times brighter than its sky's median is the sun's
 
 
-def kg_mse_outside_sun(recovered, truth) -> float:
-    """kg's MSE over the directions outside the sun's disc: the truth's texels at most SUN_FACTOR
-    times its median luminance (solid-angle weighted). In linear units the sun's few texels
-    outweigh the rest of the sky; this is the sky's error without them (all of it when the truth
-    has no sun)."""
-    a, b, weights = kg_on_common_cube(recovered, truth)
-    luminance = b.mean(-1)
+def sun_texels(kg: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(6, N, N) bool: the texels of a cube map brighter than SUN_FACTOR times its median
+    luminance over the sphere (solid-angle weighted); none in a black sky."""
+    luminance = kg.mean(-1)
     order = np.argsort(luminance, axis=None)
     cumulative = np.cumsum(weights.reshape(-1)[order])
     median = luminance.reshape(-1)[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]
-    outside = luminance <= SUN_FACTOR * median
+    return luminance > SUN_FACTOR * median
+
+
+def kg_mse_outside_sun(recovered, truth) -> float:
+    """kg's MSE over the directions outside both suns' discs (each map's texels brighter than
+    SUN_FACTOR times its median luminance), solid-angle weighted. In linear units a sun's few
+    texels outweigh the rest of the sky, the truth's where the recovery misses it, the
+    recovery's where it lies a texel beside the truth's; this is the sky's error without them
+    (all of it when neither has a sun). `sun_errors` scores the sun itself."""
+    a, b, weights = kg_on_common_cube(recovered, truth)
+    outside = ~sun_texels(b, weights) & ~sun_texels(a, weights)
     return mse(a[outside], b[outside], weights[outside]) if outside.any() else 0.0
+
+
+def sun_errors(recovered, truth) -> dict | None:
+    """The recovered sun against the truth's (None when the truth has none): the angle between
+    their directions (each its texels' luminance x solid angle weighted mean direction) and the
+    ratio of their powers (radiance x solid angle summed over their texels, per channel's mean);
+    no recovered sun reads a power ratio of 0 and no angle."""
+    a, b, weights = kg_on_common_cube(recovered, truth)
+    directions = texel_directions(a.shape[1])
+    true_sun, found_sun = sun_texels(b, weights), sun_texels(a, weights)
+    if not true_sun.any():
+        return None
+    power = lambda kg, sun: float((kg[sun].mean(-1) * weights[sun]).sum())  # noqa: E731
+    out = {"power_ratio": power(a, found_sun) / power(b, true_sun), "direction_error_deg": None}
+    if found_sun.any():
+        mean = [(kg[sun].mean(-1) * weights[sun]) @ directions[sun] for kg, sun in ((a, found_sun), (b, true_sun))]
+        cosine = mean[0] @ mean[1] / (np.linalg.norm(mean[0]) * np.linalg.norm(mean[1]))
+        out["direction_error_deg"] = float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+    return out
 
 
 def compress(radiance):
@@ -99,6 +126,7 @@ def map_errors(
     errors["emitters"] = emitter_powers(rec["ke"], true["ke"], corr.point)
     outside = kg_mse_outside_sun(recovered_maps.kg, truth_maps.kg)
     errors["kg_mse_outside_sun"] = outside
+    errors["sun"] = sun_errors(recovered_maps.kg, truth_maps.kg)
     errors["light_maps_mse_linear_outside_sun"] = float(
         np.mean([errors["map_mse"]["ke"], errors["map_mse"]["kw"], outside])
     )

@@ -39,6 +39,7 @@ from .config import resolve, settings_hash
 from .importance import TexelPixels, emitting_start
 from .network import MiloNet
 from .reflectance import refine_reflectance
+from .sun import find_sun, fit_sun, sun_texel
 from .texel_model import TexelMaps
 from .texels import Texels
 from .train import LOG_COLUMNS, Training, Views
@@ -129,18 +130,13 @@ def run(
         renderer.importance = radiance @ LUMINANCE.astype(np.float32)
     emitting = emitting_start(radiance, seen, emission, settings["warm_start_fraction"])
     model.warm_start(texels, emitting, radiance, seen, settings)
-    windows = None
-    if settings["model"] == "texels" and settings["windows"]:
-        windows = find_windows(pixels, images, train_cams, settings["sky_resolution"])
-    if windows is not None:
-        model.open_windows(texels, windows)
-        emitting = emitting & ~windows.texels
     digests = (settings_hash(settings), checkpoint.atlas_hash(atlas.position, atlas.mask))
     state = checkpoint.resume(out / "checkpoints", resume, settings, digests)
+    windows = open_daylight(training, pixels, images, radiance, seen, fit=state is None)
     if state is not None:
         training.restore(state)
     elif settings["model"] == "texels" and settings["reflectance_passes"]:
-        refine_reflectance(training, pixels, radiance, emitting if windows is None else emitting | windows.texels)
+        refine_reflectance(training, pixels, radiance, emitting | windows)
     log.info(
         "milo: %s preset, %d iterations of %d rays x %d spp, %d bounces; %d texels, %d training views; from %d",
         preset,
@@ -155,6 +151,25 @@ def run(
     drop_snapshots_after(out / "snapshots", training.iteration)
     _loop(training, out, digests, progress)
     return _finish(training, out, digests, preset, emission, sky)
+
+
+def open_daylight(training: Training, pixels: TexelPixels, images, radiance, seen, fit: bool) -> np.ndarray:
+    """The texels model's daylight: kw = 1 on the windows the photographs show the sky through
+    (window.py), the sun that lights the patch they let in (sun.py; its radiance fitted when
+    `fit`, else the checkpoint's). Returns the window texels, (H, W) bool."""
+    s, model = training.settings, training.net
+    windows = None
+    if s["model"] == "texels" and s["windows"]:
+        windows = find_windows(pixels, images, training.views.cameras, s["sky_resolution"])
+    if windows is None:
+        return np.zeros(pixels.atlas.shape, bool)
+    model.open_windows(training.texels, windows)
+    sun = find_sun(pixels, windows, radiance, seen)
+    if sun is not None and fit:
+        fit_sun(training, pixels, radiance, sun, sun_texel(sun, s))
+    elif sun is not None:
+        model.light_sun(sun_texel(sun, s), None)
+    return windows.texels
 
 
 def _loop(training: Training, out: Path, digests, progress: bool) -> None:

@@ -88,6 +88,15 @@ class TexelMaps(nn.Module):
         self.sky_log.copy_(torch.from_numpy(np.log(np.maximum(windows.sky, 1e-6)).astype(np.float32)))
 
     @torch.no_grad()
+    def light_sun(self, index: int, radiance: np.ndarray | None) -> None:
+        """The sun in the sky's cube texel `index` (sun.py finds it), at `radiance` (RGB; None:
+        as it is, a resumed run's); the sky's smoothness leaves it out (it is not like its
+        neighbours)."""
+        if radiance is not None:
+            self.sky_log[index] = torch.from_numpy(np.log(np.maximum(radiance, 1e-6)).astype(np.float32))
+        self.sky_pairs = self.sky_pairs[(self.sky_pairs != index).all(1)]
+
+    @torch.no_grad()
     def scale_reflectance(self, ratio: np.ndarray) -> None:
         """Every reflecting texel's kd times `ratio` (n, 3), kept inside (0, 1 - ks)."""
         share = torch.sigmoid(self.kd_logit) * torch.from_numpy(np.asarray(ratio, np.float32))
