@@ -3,12 +3,18 @@
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
+import torch
 import yaml
 
 from invrender.bench.milo_independent import CAMERAS
 from invrender.cli import main
+from invrender.milo import checkpoint
 from invrender.milo.importance import TexelPixels, emitting_start
 from invrender.milo.network import MiloNet
 from invrender.milo.stage import capture_scale, training_features
@@ -93,3 +99,24 @@ def training_on(root: Path, settings: dict):
     emitting = emitting_start(radiance, seen, capture_scale(training.views)[0], settings["warm_start_fraction"])
     model.warm_start(texels, emitting, radiance, seen, settings)
     return training
+
+
+def kill_at_first_checkpoint(args: list[str], out: Path) -> None:
+    """`invrender ARGS` in a subprocess, killed with SIGKILL as soon as its first checkpoint
+    under `out` is written."""
+    command = [sys.executable, "-m", "invrender.cli", *args]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 300
+    while not checkpoint.checkpoints(out / "checkpoints") and time.time() < deadline:
+        time.sleep(0.01)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    saved = checkpoint.latest(out / "checkpoints")
+    assert saved is not None and not (out / "weights.pt").exists()  # killed mid-run
+
+
+def assert_same_weights(a: Path, b: Path) -> None:
+    first, second = (torch.load(p, weights_only=False)["network"] for p in (a, b))
+    assert first.keys() == second.keys()
+    for name in first:
+        assert torch.equal(first[name], second[name]), name

@@ -1,15 +1,10 @@
 """The milo stage end to end on a tiny capture: its chain rule against autograd through the
 renderer's torch operation, resume after SIGKILL bit for bit, and the refusals."""
 
-import signal
-import subprocess
-import sys
-import time
-
 import numpy as np
 import pytest
 import torch
-from milo_capture import TINY, milo_args, training_on
+from milo_capture import TINY, assert_same_weights, kill_at_first_checkpoint, milo_args, training_on
 
 from invrender.cli import main
 from invrender.milo import checkpoint
@@ -69,21 +64,9 @@ def test_resume_after_sigkill_gives_the_same_weights(tiny_capture, tmp_path):
     assert main(milo_args(tiny_capture, tmp_path / "straight", settings)) == 0
 
     killed = tmp_path / "killed"
-    command = [sys.executable, "-m", "invrender.cli", *milo_args(tiny_capture, killed, settings)]
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 120
-    while not checkpoint.checkpoints(killed / "checkpoints") and time.time() < deadline:
-        time.sleep(0.01)
-    process.send_signal(signal.SIGKILL)
-    process.wait()
-    saved = checkpoint.latest(killed / "checkpoints")
-    assert saved is not None and not (killed / "weights.pt").exists()  # killed mid-run
-
+    kill_at_first_checkpoint(milo_args(tiny_capture, killed, settings), killed)
     assert main(milo_args(tiny_capture, killed, settings, "--resume", "always")) == 0
-    straight, resumed = _weights(tmp_path / "straight" / "weights.pt"), _weights(killed / "weights.pt")
-    assert straight.keys() == resumed.keys()
-    for name in straight:
-        assert torch.equal(straight[name], resumed[name]), name
+    assert_same_weights(tmp_path / "straight" / "weights.pt", killed / "weights.pt")
     rows = (killed / "log.csv").read_text().splitlines()
     assert [int(r.split(",")[0]) for r in rows[1:]] == list(range(1, 21))  # the killed run's extra rows dropped
 

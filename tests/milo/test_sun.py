@@ -3,7 +3,7 @@ the room generator's, its power after the milo stage against the truth's sky (ev
 sun_errors), and none under an overcast sky."""
 
 import numpy as np
-from milo_capture import WINDOW_ROOM, build_capture, milo_args
+from milo_capture import WINDOW_ROOM, assert_same_weights, build_capture, kill_at_first_checkpoint, milo_args
 from test_window import windows_of
 
 from invrender.cli import main
@@ -17,6 +17,12 @@ from invrender.synthesize.room import ENVIRONMENT_DEFAULTS
 OVERCAST = {**WINDOW_ROOM, "environment": {"sun_radiance": [0.0, 0.0, 0.0]}}
 # The stage at its cheapest: what is scored is the sun it finds and fits, not the steps
 CHEAP = {"iterations": 1, "reflectance_passes": 1, "reflectance_spp": 16, "rays": 1024, "spp": 1}
+
+
+def texels_args(root, out, settings: dict, *extra: str) -> list[str]:
+    args = milo_args(root, out, settings, *extra)
+    args[args.index("demo")] = "texels"
+    return args
 
 
 def true_sun_direction() -> np.ndarray:
@@ -39,9 +45,7 @@ def test_the_suns_direction_is_found_from_its_patch(window_room):
 
 
 def test_the_stage_lights_the_sun_at_the_truths_power(window_room, tmp_path):
-    args = milo_args(window_room, tmp_path / "milo", CHEAP)
-    args[args.index("demo")] = "texels"
-    assert main(args) == 0
+    assert main(texels_args(window_room, tmp_path / "milo", CHEAP)) == 0
     kg = np.load(tmp_path / "milo" / "maps.npz")["kg"]
     truth = load_scene(window_room / "capture" / "ground_truth" / "scene").maps.kg
     errors = sun_errors(kg, truth)
@@ -49,6 +53,17 @@ def test_the_stage_lights_the_sun_at_the_truths_power(window_room, tmp_path):
     # 0.96 on the benchmark's window room); no sun reads 0, one fitted twice over 2
     assert 0.5 < errors["power_ratio"] < 1.5
     assert errors["direction_error_deg"] < 8.0  # the sun in one texel of a 16 x 16 face
+
+
+def test_a_run_with_a_window_and_a_sun_resumes_bit_for_bit(window_room, tmp_path):
+    """Killed after its first checkpoint, resumed: the window, the sun's texel and the sky's
+    smoothness without it are found again, the sun's radiance is the checkpoint's."""
+    settings = {**CHEAP, "iterations": 4, "checkpoint_every": 2}
+
+    assert main(texels_args(window_room, tmp_path / "straight", settings)) == 0
+    kill_at_first_checkpoint(texels_args(window_room, tmp_path / "killed", settings), tmp_path / "killed")
+    assert main(texels_args(window_room, tmp_path / "killed", settings, "--resume", "always")) == 0
+    assert_same_weights(tmp_path / "straight" / "weights.pt", tmp_path / "killed" / "weights.pt")
 
 
 def test_an_overcast_sky_has_no_sun(tmp_path):

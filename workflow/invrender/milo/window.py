@@ -125,7 +125,7 @@ def find_windows(pixels: TexelPixels, images, cameras: list[Camera], sky_resolut
         if np.isfinite(by_texel) and by_direction < DIRECTION_GAIN * by_texel:
             window[patch] = True
             log.info(
-                "milo: a window of %d texels (log residual %.3f by direction, %.3f by texel)",
+                "milo: a window of %d texels (views differ by %.3f in log by direction, %.3f by texel)",
                 len(patch),
                 by_direction,
                 by_texel,
@@ -152,9 +152,10 @@ def patches(members: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
     a, b = pairs[both].T
     graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(members),) * 2)
     _, label = connected_components(graph, directed=False)
-    label = np.where(members, label, -1)
-    found = [np.flatnonzero(label == k) for k in np.unique(label[label >= 0])]
-    return [p for p in found if len(p) >= MIN_TEXELS]
+    index = np.flatnonzero(members)
+    order = np.argsort(label[index], kind="stable")
+    _, starts, sizes = np.unique(label[index][order], return_index=True, return_counts=True)
+    return [index[order[a : a + k]] for a, k in zip(starts, sizes) if k >= MIN_TEXELS]
 
 
 def grow(window: np.ndarray, views: Views, pairs: np.ndarray, cube: int) -> np.ndarray:
