@@ -1,6 +1,7 @@
 """Windows found in the photographs (milo/window.py): on a room with a window onto sun and sky,
 the texels found against the truth's kw and the sky they show against the truth's kg; on the same
-room at night, none; the pairing statistic against hand-made observations."""
+room at night, none; the pairing statistic and the rays beyond a surface against hand-made
+cases."""
 
 import numpy as np
 import pytest
@@ -10,10 +11,10 @@ from invrender.bench.milo_independent import DARK, truth_maps
 from invrender.milo.config import resolve
 from invrender.milo.importance import TexelPixels
 from invrender.milo.stage import training_features
-from invrender.milo.window import Views, find_windows, pair_difference
+from invrender.milo.window import Beyond, Views, find_windows, pair_difference
 from invrender.render.renderer import Renderer
 from invrender.scene.atlas import AtlasTexels
-from invrender.scene.cameras import read_cameras
+from invrender.scene.cameras import pinhole_camera, read_cameras
 from invrender.scene.capture import read_view
 from invrender.scene.cubemap import as_cube
 from invrender.scene.mesh_io import read_mesh
@@ -66,3 +67,29 @@ def test_views_agree_by_direction_through_a_window_and_by_texel_on_a_wall():
     assert pair_difference(window_views, texel, view) > 0.3
     assert pair_difference(wall_views, texel, view) == pytest.approx(0.0)
     assert pair_difference(wall_views, direction, texel) > 0.2
+
+
+def test_the_rays_through_a_window_leave_the_room_and_those_into_a_table_meet_the_floor():
+    """A floor, a wall and a table top as points 5 cm apart; two views: the rays through a patch
+    of the wall go on outside, those into the table's top (a mirror of the sky would agree by
+    direction too) meet the floor under it."""
+    g = np.arange(-1.0, 1.0001, 0.05)
+    floor = np.stack(np.meshgrid(g, [0.0], g, indexing="ij"), -1).reshape(-1, 3)
+    wall = np.stack(np.meshgrid(g, g + 1.0, [-1.0], indexing="ij"), -1).reshape(-1, 3)
+    top = floor[(np.abs(floor[:, 0]) < 0.3) & (np.abs(floor[:, 2]) < 0.3)] + [0.0, 0.7, 0.0]
+    points = np.concatenate([floor, wall, top])
+    cameras = [
+        pinhole_camera(f"v{i}", eye, (0.0, 0.8, -0.5), 32, 24, 60.0)
+        for i, eye in enumerate([(0.5, 1.5, 0.9), (-0.5, 1.4, 0.8)])
+    ]
+    beyond = Beyond(points)
+
+    def views_of(texels):
+        texel, view = np.repeat(texels, 2), np.tile([0, 1], len(texels))
+        return Views(texel, view, np.zeros((len(texel), 3)), np.zeros(len(texel)), np.zeros(len(texel), int))
+
+    in_wall = np.flatnonzero((np.abs(points[:, 2] + 1.0) < 1e-9) & (np.abs(points[:, 0]) < 0.4))
+    in_wall = in_wall[(points[in_wall, 1] > 1.2) & (points[in_wall, 1] < 1.8)]
+    in_top = np.arange(len(floor) + len(wall), len(points))
+    assert beyond.leaving(views_of(in_wall), cameras) == 1.0
+    assert beyond.leaving(views_of(in_top), cameras) == 0.0

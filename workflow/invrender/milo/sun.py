@@ -29,7 +29,7 @@ from ..render.scene_buffers import LUMINANCE
 from ..scene.cubemap import cube_texel_solid_angles
 from ..scene.neighbours import point_spacing
 from .importance import TexelPixels
-from .window import Windows, covered_pairs, cube_index, patches
+from .window import MIN_TEXELS, Windows, covered_pairs, cube_index, patches
 
 log = logging.getLogger(__name__)
 SUN_CONTRAST = 1.6  # least patch / ring (medians) of a sun: 1.8-2.0 measured, 1.44 by an overcast window
@@ -173,11 +173,13 @@ def find_sun(pixels: TexelPixels, windows: Windows, captured: np.ndarray, seen: 
     times brighter than its ring)."""
     score = PatchScore(pixels, windows, captured, seen)
     if not score.planes:
+        log.info("milo: no sun (no window of %d texels to let it in)", MIN_TEXELS)
         return None
     candidates = fibonacci_directions(COARSE_DIRECTIONS)
     candidates = candidates[candidates[:, 1] > 0.02]  # above the horizon
     scores = np.array([score.broad(d) for d in candidates])
     if not np.isfinite(scores).any():
+        log.info("milo: no sun (no window lets in a patch of %d texels)", MIN_PATCH)
         return None
     best = candidates[int(np.argmax(scores))]
     cap = np.radians(COARSE_SPACING_DEG)

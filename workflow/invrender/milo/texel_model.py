@@ -81,11 +81,13 @@ class TexelMaps(nn.Module):
     @torch.no_grad()
     def open_windows(self, texels, windows) -> None:
         """kw = 1 on `windows`' texels (window.Windows, the atlas's (H, W)), which neither emit nor
-        reflect; the sky starts at what the photographs show through them."""
+        reflect; the sky starts at what the photographs show through them (where they show
+        nothing on its side of the horizon, as it was)."""
         window = texels.gather_grown(windows.texels.astype(np.float32)) > 0.5
         self.window.copy_(torch.from_numpy(window.astype(np.float32))[:, None])
         self.emitter.mul_(1.0 - self.window)
-        self.sky_log.copy_(torch.from_numpy(np.log(np.maximum(windows.sky, 1e-6)).astype(np.float32)))
+        seen_sky = torch.from_numpy(np.log(np.maximum(windows.sky, 1e-6)).astype(np.float32))
+        self.sky_log.copy_(torch.where(torch.from_numpy(windows.filled)[:, None], seen_sky, self.sky_log))
 
     @torch.no_grad()
     def light_sun(self, index: int, radiance: np.ndarray | None) -> None:

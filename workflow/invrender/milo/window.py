@@ -9,9 +9,12 @@ edge's mixed pixels are scattered, not a patch.
 
 Found in three steps: seeds are texels whose views' radiance spreads widely; a connected patch
 of seeds is a window when binning its views by direction (the sky's cube texels) explains them
-far better than binning them by texel; a window grows into its neighbours whose views the sky it
-has seen predicts (its top sees sky from every view, its bottom the ground: they spread little).
-What the window's views saw is the sky's start (cube texels no view saw take the nearest seen one).
+far better than binning them by texel and the views' rays, continued, leave the room (a glossy
+table mirrors the sky as a window shows it, but the floor lies beyond it); a window grows into
+its neighbours whose views the sky it has seen predicts (its top sees sky from every view, its
+bottom the ground: they spread little).
+What the window's views saw is the sky's start (cube texels no view saw take the nearest seen one
+on their side of the horizon).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from ..render.scene_buffers import LUMINANCE
 from ..scene.cubemap import cube_texel, direction_to_cube, texel_directions
-from ..scene.neighbours import neighbour_pairs
+from ..scene.neighbours import neighbour_pairs, point_spacing
 from ..scene.types import Camera
 from .importance import TexelPixels, per_group_median
 
@@ -38,6 +41,8 @@ MIN_PAIRS = 32  # pairs of observations a residual needs to say anything
 DIRECTION_GAIN = 0.05  # a window's residual by direction is at most this share of its residual by texel
 GROW_TOLERANCE = 0.15  # a grown texel's views lie within this of the sky seen (median |log|)
 NEIGHBOUR_RADIUS = 1.5  # texel spacings
+LEAVING = 0.8  # least share of a window's views' rays that meet nothing beyond it
+MARCHED = 256  # rays marched per patch
 LOG_FLOOR = 1e-3  # of the capture's median radiance: black pixels keep a finite log
 
 
@@ -100,11 +105,36 @@ def pair_difference(views: Views, groups: np.ndarray, other: np.ndarray) -> floa
     return float(np.median(np.abs(np.diff(v)[paired]))) if paired.sum() >= MIN_PAIRS else np.inf
 
 
+class Beyond:
+    """What lies beyond a surface along the views' rays, marched against the covered texels'
+    points: a window's rays leave the room, a glossy table's (which mirrors the sky as a window
+    shows it) meet the floor under it."""
+
+    def __init__(self, points: np.ndarray):
+        self.points, self.tree = points, cKDTree(points)
+        self.spacing = point_spacing(points, self.tree)
+        self.reach = float(np.linalg.norm(points.max(0) - points.min(0)))
+
+    def leaving(self, views: Views, cameras: list[Camera]) -> float:
+        """The share of (at most MARCHED) `views`' rays that meet no texel beyond their own."""
+        pick = np.random.default_rng(0).permutation(len(views.texel))[:MARCHED]
+        start = self.points[views.texel[pick]]
+        centres = np.array([c.center for c in cameras])[views.view[pick]]
+        d = start - centres
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        steps = np.arange(2, int(self.reach / self.spacing) + 2) * self.spacing
+        along = start[:, None] + steps[None, :, None] * d[:, None]
+        distance, _ = self.tree.query(along.reshape(-1, 3), distance_upper_bound=self.spacing)
+        met = np.isfinite(distance).reshape(len(pick), len(steps)).any(1)
+        return float(1.0 - met.mean()) if len(pick) else 0.0
+
+
 @dataclass
 class Windows:
     texels: np.ndarray  # (H, W) bool: the atlas's window texels
     sky: np.ndarray  # (6 n n, 3) the sky's start: what the windows' views saw
     seen: np.ndarray  # (6 n n,) bool: which cube texels any window view saw
+    filled: np.ndarray  # (6 n n,) bool: which `sky` gives a start (the others keep theirs)
 
 
 def find_windows(pixels: TexelPixels, images, cameras: list[Camera], sky_resolution: int) -> Windows | None:
@@ -117,12 +147,19 @@ def find_windows(pixels: TexelPixels, images, cameras: list[Camera], sky_resolut
     spread, _ = group_median(views.texel, np.abs(views.log_luminance - median[views.texel, 0])[:, None], n)
     seeds = (count >= MIN_VIEWS) & (spread[:, 0] > SEED_SPREAD)
     pairs = covered_pairs(pixels)
+    beyond = Beyond(pixels.atlas.position[pixels.rows, pixels.cols].astype(np.float64))
     window = np.zeros(n, bool)
     for patch in patches(seeds, pairs):
         of_patch = views.select(np.isin(views.texel, patch))
         by_direction = pair_difference(of_patch, of_patch.direction, of_patch.texel)
         by_texel = pair_difference(of_patch, of_patch.texel, of_patch.view)
-        if np.isfinite(by_texel) and by_direction < DIRECTION_GAIN * by_texel:
+        if not (np.isfinite(by_texel) and by_direction < DIRECTION_GAIN * by_texel):
+            continue
+        leaving = beyond.leaving(of_patch, cameras)
+        log.info(
+            "milo: %d texels agree by direction, %.0f %% of their views' rays leave the room", len(patch), 100 * leaving
+        )
+        if leaving >= LEAVING:
             window[patch] = True
             log.info(
                 "milo: a window of %d texels (views differ by %.3f in log by direction, %.3f by texel)",
@@ -133,6 +170,7 @@ def find_windows(pixels: TexelPixels, images, cameras: list[Camera], sky_resolut
     if not window.any():
         return None
     window = grow(window, views, pairs, cube)
+    log.info("milo: %d window texels after growing", window.sum())
     in_atlas = np.zeros(pixels.atlas.shape, bool)
     in_atlas[pixels.rows[window], pixels.cols[window]] = True
     return Windows(in_atlas, *sky_seen(views.select(window[views.texel]), sky_resolution))
@@ -178,11 +216,17 @@ def grow(window: np.ndarray, views: Views, pairs: np.ndarray, cube: int) -> np.n
         window |= accepted
 
 
-def sky_seen(views: Views, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """((6 n n, 3) the median RGB the window's views saw per cube texel, the nearest seen cube
-    texel's where none did; (6 n n,) which were seen)."""
+def sky_seen(views: Views, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((6 n n, 3) the median RGB the window's views saw per cube texel, elsewhere the nearest
+    seen cube texel's on the same side of the horizon (+Y is up: the sky is not the ground);
+    (6 n n,) which were seen; (6 n n,) which have a value (a side no view saw has none))."""
     sky, count = group_median(views.direction, views.rgb, 6 * n * n)
     seen = count > 0
     directions = texel_directions(n).reshape(-1, 3)
-    _, nearest = cKDTree(directions[seen]).query(directions)
-    return sky[seen][nearest].astype(np.float32), seen
+    filled = seen.copy()
+    for side in (directions[:, 1] >= 0, directions[:, 1] < 0):
+        if (seen & side).any():
+            _, nearest = cKDTree(directions[seen & side]).query(directions[side])
+            sky[side] = sky[seen & side][nearest]
+            filled |= side
+    return sky.astype(np.float32), seen, filled
