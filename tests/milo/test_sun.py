@@ -16,7 +16,7 @@ from invrender.synthesize.room import ENVIRONMENT_DEFAULTS
 
 OVERCAST = {**WINDOW_ROOM, "environment": {"sun_radiance": [0.0, 0.0, 0.0]}}
 # The stage at its cheapest: what is scored is the sun it finds and fits, not the steps
-CHEAP = {"iterations": 1, "reflectance_passes": 1, "reflectance_spp": 16, "rays": 1024, "spp": 1}
+CHEAP = {"iterations": 1, "reflectance_passes": 0, "reflectance_spp": 16, "rays": 1024, "spp": 1}
 
 
 def texels_args(root, out, settings: dict, *extra: str) -> list[str]:
