@@ -10,10 +10,10 @@ than SUN_CONTRAST times brighter than its ring is no sun (an overcast sky, a roo
 in the sun). Occluders between the window and the patch are ignored: their shadow lowers the
 patch's median, not which direction wins.
 
-Its radiance is the one that makes the patch's reflectance its ring's: the irradiance without the
-sun comes from one render of the maps as they start (radiance / kd, texel by texel), the sun adds
-L_sun * solid angle * cos(theta) / pi to it inside the patch, and the reflectance the ring shows
-(captured / irradiance) is asked of the patch too.
+Its radiance is the one that makes the patch's reflectance its ring's: the irradiance comes from a
+render of the maps (radiance / kd, texel by texel), the sun adds L_sun * solid angle * cos(theta)
+/ pi to it inside the patch, and the reflectance the ring shows (captured / irradiance) is asked
+of the patch too; a second render with the sun in adds the light its patch throws onto the ring.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from ..render.scene_buffers import LUMINANCE
 from ..scene.cubemap import cube_texel_solid_angles
 from ..scene.neighbours import point_spacing
 from .importance import TexelPixels
-from .window import MIN_TEXELS, Windows, covered_pairs, cube_index, patches
+from .window import MIN_TEXELS, Windows, covered_pairs, cube_index, neighbours_of, patches
 
 log = logging.getLogger(__name__)
 SUN_CONTRAST = 1.6  # least patch / ring (medians) of a sun: 1.8-2.0 measured, 1.44 by an overcast window
@@ -94,10 +94,11 @@ class Sun:
     contrast: float  # the patch's median luminance over the ring's
 
 
-def fibonacci_directions(count: int) -> np.ndarray:
+def fibonacci_directions(count: int, cap: float = np.pi) -> np.ndarray:
+    """`count` directions evenly spread (a Fibonacci spiral) within `cap` radians of +y."""
     i = np.arange(count) + 0.5
-    y = 1 - 2 * i / count
-    r, phi = np.sqrt(1 - y**2), np.pi * (1 + 5**0.5) * i
+    y = 1 - (1 - np.cos(cap)) * i / count
+    r, phi = np.sqrt(np.maximum(1 - y**2, 0.0)), np.pi * (1 + 5**0.5) * i
     return np.stack([r * np.cos(phi), y, r * np.sin(phi)], 1)
 
 
@@ -126,12 +127,8 @@ class PatchScore:
 
     def dilate(self, members: np.ndarray, rings: int) -> np.ndarray:
         """`members` and the texels within `rings` neighbour steps of them."""
-        members = members.copy()
         for _ in range(rings):
-            grown = members.copy()
-            for a, b in (self.pairs.T, self.pairs[:, ::-1].T):
-                grown[b[members[a]]] = True
-            members = grown
+            members = members | neighbours_of(members, self.pairs)
         return members
 
     def core_and_ring(self, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,12 +200,9 @@ def find_sun(pixels: TexelPixels, windows: Windows, captured: np.ndarray, seen: 
 
 
 def directions_around(d: np.ndarray, cap: float, count: int) -> np.ndarray:
-    """d and `count` directions within `cap` radians of it, evenly spread (a Fibonacci spiral on
-    the cap around +y, turned onto d)."""
-    i = np.arange(count) + 0.5
-    y = 1 - (1 - np.cos(cap)) * i / count
-    r, phi = np.sqrt(1 - y**2), np.pi * (1 + 5**0.5) * i
-    local = np.stack([r * np.cos(phi), y, r * np.sin(phi)], 1)
+    """d and `count` directions within `cap` radians of it, evenly spread (the spiral around +y
+    turned onto d)."""
+    local = fibonacci_directions(count, cap)
     axis = np.cross([0.0, 1.0, 0.0], d)
     sine, cosine = np.linalg.norm(axis), float(d[1])
     if sine < 1e-9:

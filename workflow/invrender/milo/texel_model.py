@@ -110,8 +110,7 @@ class TexelMaps(nn.Module):
     def _maps(self, rows=None) -> torch.Tensor:
         """The 11-channel maps of the texels `rows` (None: every texel)."""
         at = slice(None) if rows is None else torch.as_tensor(rows)
-        emitter, window = self.emitter[at], self.window[at]
-        reflecting = 1.0 - emitter - window
+        reflecting = self._reflecting(at)
         low_ka, high_ka = RANGES["ka"]
         kd, ks, ka_unit = self._reflectance(at)
         columns = {
@@ -119,7 +118,7 @@ class TexelMaps(nn.Module):
             "ks": ks.expand(-1, 3) * reflecting,
             "ka": (low_ka + (high_ka - low_ka) * ka_unit) * reflecting + EMITTER_KA * (1.0 - reflecting),
             "ke": self._emission(at),
-            "kw": window,
+            "kw": self.window[at],
         }
         maps = torch.cat([columns[name] for name in GRAD_CHANNELS], -1)
         assert maps.shape[1] == ATLAS_CHANNELS

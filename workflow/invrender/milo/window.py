@@ -196,6 +196,15 @@ def patches(members: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
     return [index[order[a : a + k]] for a, k in zip(starts, sizes) if k >= MIN_TEXELS]
 
 
+def neighbours_of(members: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """(n,) bool: the texels one of the neighbour `pairs` links to a member (members too, where
+    two members neighbour)."""
+    out = np.zeros_like(members)
+    for a, b in (pairs.T, pairs[:, ::-1].T):
+        out[b[members[a]]] = True
+    return out
+
+
 def grow(window: np.ndarray, views: Views, pairs: np.ndarray, cube: int) -> np.ndarray:
     """`window` grown ring by ring into neighbouring texels whose views the sky seen
     through the window so far predicts within GROW_TOLERANCE, colour by colour."""
@@ -204,9 +213,7 @@ def grow(window: np.ndarray, views: Views, pairs: np.ndarray, cube: int) -> np.n
     while True:
         keep = window[views.texel]
         sky, seen = group_median(views.direction[keep], log_rgb[keep], cube)
-        ring = np.zeros_like(window)
-        for a, b in (pairs.T, pairs[:, ::-1].T):
-            ring[b[window[a] & ~window[b]]] = True
+        ring = neighbours_of(window, pairs) & ~window
         of_ring = ring[views.texel] & (seen[views.direction] > 0)
         error = np.abs(log_rgb - sky[views.direction]).max(1)[of_ring][:, None]
         misfit, count = group_median(views.texel[of_ring], error, len(window))
