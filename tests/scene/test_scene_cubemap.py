@@ -300,3 +300,9 @@ def test_tiny_images_are_refused():
         cm.latlong_to_cube(np.ones((1, 4, 3)), 4)
     with pytest.raises(ValueError, match="2 x 2"):
         cm.cube_to_latlong(np.ones((6, 4, 4, 3)), 1)
+
+
+def test_each_texels_centre_direction_indexes_that_texel():
+    n = 5
+    directions = cm.texel_directions(n).reshape(-1, 3)
+    np.testing.assert_array_equal(cm.texel_index(directions, n), np.arange(6 * n * n))

@@ -26,10 +26,10 @@ import numpy as np
 
 from ..render.batches import iteration_seed
 from ..render.scene_buffers import LUMINANCE
-from ..scene.cubemap import cube_texel_solid_angles
+from ..scene.cubemap import cube_texel_solid_angles, texel_index
 from ..scene.neighbours import point_spacing
 from .importance import TexelPixels
-from .window import MIN_TEXELS, Windows, covered_pairs, cube_index, neighbours_of, patches
+from .window import MIN_TEXELS, Windows, covered_pairs, neighbours_of, patches
 
 log = logging.getLogger(__name__)
 SUN_CONTRAST = 1.6  # least patch / ring (medians) of a sun: 1.8-2.0 measured, 1.44 by an overcast window
@@ -247,4 +247,4 @@ def lacking_sun(training, pixels: TexelPixels, captured: np.ndarray, sun: Sun, r
 
 def sun_texel(sun: Sun, settings: dict) -> int:
     """The sky's cube texel the sun lies in."""
-    return int(cube_index(sun.direction[None], settings["sky_resolution"])[0])
+    return int(texel_index(sun.direction[None], settings["sky_resolution"])[0])

@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..render.scene_buffers import LUMINANCE
-from ..scene.cubemap import cube_texel, direction_to_cube, texel_directions
+from ..scene.cubemap import texel_directions, texel_index
 from ..scene.neighbours import neighbour_pairs, point_spacing
 from ..scene.types import Camera
 from .importance import TexelPixels, per_group_median
@@ -66,7 +66,7 @@ class Views:
             texel.append(seen)
             view.append(np.full(len(seen), index))
             rgb.append(np.asarray(image).reshape(-1, 3)[flat])
-            direction.append(cube_index(points[seen] - camera.center, sky_resolution))
+            direction.append(texel_index(points[seen] - camera.center, sky_resolution))
         rgb = np.concatenate(rgb).astype(np.float64)
         luminance = rgb @ LUMINANCE
         floor = LOG_FLOOR * max(float(np.median(luminance)), 1e-9)
@@ -80,13 +80,6 @@ class Views:
 
     def select(self, keep: np.ndarray) -> Views:
         return Views(self.texel[keep], self.view[keep], self.rgb[keep], self.log_luminance[keep], self.direction[keep])
-
-
-def cube_index(directions: np.ndarray, n: int) -> np.ndarray:
-    """Flat index into the 6 x n x n cube (texel_directions' order) of each direction."""
-    face, s, t = direction_to_cube(directions)
-    row, col = cube_texel(s, t, n)
-    return (face * n + row) * n + col
 
 
 def group_median(groups: np.ndarray, values: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -107,6 +107,14 @@ def cube_texel(s, t, n: int):
     return row, col
 
 
+def texel_index(d, n: int) -> np.ndarray:
+    """Flat index into the 6 x N x N cube (texel_directions' order, face-major) of the texel each
+    direction d (..., 3) falls in."""
+    face, s, t = direction_to_cube(d)
+    row, col = cube_texel(s, t, n)
+    return (face * n + row) * n + col
+
+
 def texel_directions(n: int) -> np.ndarray:
     """(6, N, N, 3) unit direction of each texel's centre."""
     face = np.arange(6)[:, None, None]
